@@ -1,0 +1,32 @@
+# The two commands of the README: `make demo` and `make test`.
+PY ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+ARCH ?= cpu
+
+.PHONY: demo test test-slow bench venv clean
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	$(PY) -m venv $(VENV)
+	$(BIN)/pip install --upgrade pip >/dev/null
+	$(BIN)/pip install -e ".[test]"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	mkdir -p out
+	$(BIN)/taichi-spheres run scenes/seed_five.toml -o out/seed_five.mp4 --arch $(ARCH)
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q --arch $(ARCH)
+
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -q --arch $(ARCH) --slow
+
+bench: $(STAMP)
+	$(BIN)/python tools/bench.py --arch $(ARCH)
+
+clean:
+	rm -rf $(VENV) out *.egg-info

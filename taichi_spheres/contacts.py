@@ -1,0 +1,306 @@
+"""Pair contacts (step stages 3-4): parallel detection, rewind to contact, collide per colour.
+
+Physics (DESIGN.md; the seed paper's eqs. (8)-(14) written without angles):
+for spheres i, j with unit normal ``n = (x_i - x_j)/|x_i - x_j|`` at contact and
+relative velocity ``u = v_i - v_j`` approaching (``u.n < 0``),
+``J = (1 + e) m_i m_j/(m_i + m_j) (u.n)``, ``v_i -= J n/m_i``, ``v_j += J n/m_j``.
+
+Rewind: gravity accelerates both spheres equally, so their relative motion within a
+step is linear; with ``d``, ``u`` the relative position and velocity at the end of
+the step and ``sigma = r_i + r_j``, the time since contact ``s`` solves
+``|d - u s| = sigma``: ``s = (sigma^2 - |d|^2) / (sqrt((d.u)^2 + |u|^2 (sigma^2 - |d|^2)) - d.u)``
+(the cancellation-free form of the larger root). The impulse is applied at contact
+and carried forward: ``x_i += dv_i s``, ``v_i += dv_i`` (gravity drops out).
+
+Parallel resolution: see :mod:`taichi_spheres.grid` for ownership and colours. One
+thread per owner cell of the current colour repeatedly picks, among the overlapping
+approaching pairs of its block, the one with the earliest contact (largest ``s``)
+and collides it, as many times as the detection pass counted pairs for that cell.
+Spheres a collision touched are re-examined against all their neighbours in the
+next sweep.
+"""
+
+import numpy as np
+import taichi as ti
+
+from .grid import BLOCK_PAIRS, FORWARD_OFFSETS, Grid
+from .params import MOVED, OPEN_OVERLAP, PAIRS, REMAINING, SEP_OVERLAP, VMAX2, StepParams
+from .state import Features, SphereState
+from .walls import Motion
+
+STENCIL = FORWARD_OFFSETS + tuple(tuple(-c for c in o) for o in FORWARD_OFFSETS[1:])
+
+#: Upper bound on collisions one owner cell resolves in one sweep (the rest wait
+#: for the next sweep).
+MAX_BLOCK_COLLISIONS = 64
+
+
+@ti.data_oriented
+class Contacts:
+    """Detection and colour-by-colour resolution of overlapping approaching pairs.
+
+    Fields: active (M,) i32 — approaching overlapping pairs owned by each cell,
+    found by the last detection pass. Debug: pairs (K, 2) i32 for tests.
+    """
+
+    def __init__(self, state: SphereState, grid: Grid, params: StepParams, motion: Motion,
+                 features: Features, serial_light: bool, serial_heavy: bool):
+        self.state = state
+        self.grid = grid
+        self.params = params
+        self.motion = motion
+        self.f = features
+        self.real = state.real
+        self.n = state.n
+        self.serial_light = serial_light
+        self.serial_heavy = serial_heavy
+        eps = float(np.finfo(np.float64 if self.real == ti.f64 else np.float32).eps)
+        self.approach_eps = 8.0 * eps
+        self.active = ti.field(ti.i32, shape=grid.m)
+        # stencils as small tables walked by runtime loops (unrolling them multiplies
+        # compile time); STENCIL = (0,0,0), 13 forward offsets, then their negatives
+        self.stencil = ti.Vector.field(3, ti.i32, shape=len(STENCIL))
+        self.stencil.from_numpy(np.array(STENCIL, dtype=np.int32))
+        self.block = ti.Vector.field(3, ti.i32, shape=(len(BLOCK_PAIRS), 2))
+        self.block.from_numpy(np.array(BLOCK_PAIRS, dtype=np.int32))
+        self.colours = grid.geom.colours
+        self.debug_pairs = None
+
+    # ---- pair geometry and physics ----
+    @ti.func
+    def separation(self, i, j):
+        """d = x_i - x_j (minimum image on periodic axes) [m], u = v_i - v_j [m/s],
+        sigma = r_i + r_j [m]."""
+        d = self.state.x[i] - self.state.x[j]
+        for a in ti.static(range(3)):
+            if ti.static(not self.f.wall_axes[a]):
+                size = self.params.size[None][a]
+                d[a] -= size * ti.round(d[a] / size)
+        return d, self.state.v[i] - self.state.v[j], self.state.rad(i) + self.state.rad(j)
+
+    @ti.func
+    def approaching(self, dd, du, uu):
+        """d.u < 0 beyond round-off (relative to |d||u|)."""
+        return du < -ti.cast(ti.static(self.approach_eps), self.real) * ti.sqrt(dd * uu)
+
+    @ti.func
+    def time_since_contact(self, dd, du, uu, sigma):
+        """s >= 0 with |d - u s| = sigma for an overlapping approaching pair [s],
+        capped at the current step length."""
+        c = sigma * sigma - dd
+        s = c / (ti.sqrt(du * du + uu * c) - du)
+        return ti.min(s, self.params.h[None])
+
+    @ti.func
+    def collide(self, i, j, s):
+        """Rewind i, j by s to contact, apply the restitution impulse, carry forward."""
+        d, u, sigma = self.separation(i, j)
+        n = (d - u * s).normalized()
+        un = u.dot(n)
+        if un < 0:
+            e = ti.cast(1, self.real)
+            if ti.static(not self.f.elastic):
+                e = self.params.e[None]
+            wi = ti.cast(0.5, self.real)
+            wj = ti.cast(0.5, self.real)
+            if ti.static(not self.f.equal_masses):
+                imi = self.state.inv_mass_of(i)
+                imj = self.state.inv_mass_of(j)
+                wi = imi / (imi + imj)
+                wj = imj / (imi + imj)
+            dv = -(1 + e) * un * n
+            dvi = wi * dv
+            dvj = -wj * dv
+            self.state.x[i] += dvi * s
+            self.state.v[i] += dvi
+            self.state.x[j] += dvj * s
+            self.state.v[j] += dvj
+            self.state.modified[i] = 1
+            self.state.modified[j] = 1
+            self.state.moved[i] += dvi.norm() * s
+            self.state.moved[j] += dvj.norm() * s
+            ti.atomic_add(self.params.count[PAIRS], 1)
+            ti.atomic_max(self.params.vals[VMAX2], ti.max(self.state.v[i].norm_sqr(), self.state.v[j].norm_sqr()))
+            ti.atomic_max(self.params.vals[MOVED], ti.max(self.state.moved[i], self.state.moved[j]))
+
+    # ---- detection ----
+    @ti.func
+    def examine(self, i, j, ci, cj):
+        """Classify pair (i, j) in cells ci, cj: an approaching overlap is counted for
+        its owner cell; a separating overlap only updates the max overlap."""
+        d, u, sigma = self.separation(i, j)
+        dd = d.norm_sqr()
+        if dd < sigma * sigma:
+            rel = 1 - ti.sqrt(dd) / sigma
+            if self.approaching(dd, d.dot(u), u.norm_sqr()):
+                owner = self.grid.linear(self.grid.owner(ci, cj))
+                ti.atomic_add(self.active[owner], 1)
+                ti.atomic_add(self.params.count[REMAINING], 1)
+                ti.atomic_max(self.params.vals[OPEN_OVERLAP], rel)
+            else:
+                ti.atomic_max(self.params.vals[SEP_OVERLAP], rel)
+
+    @ti.kernel
+    def detect_all(self):
+        """Half-stencil scan of every sphere: fills ``active`` and count[REMAINING]."""
+        self.params.reset_detection()
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for c in range(self.grid.m):
+            self.active[c] = 0
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for i in range(self.n):
+            self.state.modified[i] = 0
+        ti.loop_config(serialize=ti.static(self.serial_heavy))
+        for i in range(self.n):
+            ci = self.grid.coords(self.grid.cell_of[i])
+            for k in range(ti.static(len(FORWARD_OFFSETS))):
+                cj, ok = self.grid.shifted(ci, self.stencil[k])
+                if ok:
+                    kj = self.grid.linear(cj)
+                    for q in range(self.grid.start[kj], self.grid.start[kj + 1]):
+                        j = self.grid.order[q]
+                        if k > 0 or j > i:
+                            self.examine(i, j, ci, cj)
+
+    @ti.func
+    def detect_from_modified(self):
+        """Full-stencil scan from spheres touched in this sweep (each pair once)."""
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for i in range(self.n):
+            if self.state.modified[i]:
+                ci = self.grid.coords(self.grid.cell_of[i])
+                for k in range(ti.static(len(STENCIL))):
+                    cj, ok = self.grid.shifted(ci, self.stencil[k])
+                    if ok:
+                        kj = self.grid.linear(cj)
+                        for q in range(self.grid.start[kj], self.grid.start[kj + 1]):
+                            j = self.grid.order[q]
+                            if j != i and (self.state.modified[j] == 0 or j > i):
+                                self.examine(i, j, ci, cj)
+
+    # ---- resolution ----
+    @ti.func
+    def resolve_block(self, c, budget):
+        """Collide up to ``budget`` overlapping approaching pairs owned by cell c
+        (vec3), earliest contact first. Touches only spheres in c + {0,1}^3."""
+        for _it in range(budget):
+            best_s = ti.cast(-1, self.real)
+            bi = -1
+            bj = -1
+            for k in range(ti.static(len(BLOCK_PAIRS))):
+                ca, oka = self.grid.shifted(c, self.block[k, 0])
+                cb, okb = self.grid.shifted(c, self.block[k, 1])
+                if oka and okb:
+                    ka = self.grid.linear(ca)
+                    kb = self.grid.linear(cb)
+                    for pa in range(self.grid.start[ka], self.grid.start[ka + 1]):
+                        i = self.grid.order[pa]
+                        q0 = self.grid.start[kb]
+                        if k == 0:
+                            q0 = pa + 1
+                        for q in range(q0, self.grid.start[kb + 1]):
+                            j = self.grid.order[q]
+                            d, u, sigma = self.separation(i, j)
+                            dd = d.norm_sqr()
+                            if dd < sigma * sigma:
+                                du = d.dot(u)
+                                uu = u.norm_sqr()
+                                if self.approaching(dd, du, uu):
+                                    s = self.time_since_contact(dd, du, uu, sigma)
+                                    if s > best_s:
+                                        best_s = s
+                                        bi = i
+                                        bj = j
+            if bi < 0:
+                break
+            self.collide(bi, bj, best_s)
+
+    @ti.kernel
+    def resolve_colour(self, sx: ti.i32, dx: ti.i32, nx: ti.i32, sy: ti.i32, dy: ti.i32,
+                       ny: ti.i32, sz: ti.i32, dz: ti.i32, nz: ti.i32):
+        """One parallel pass over the owner cells (sx + dx*I, sy + dy*J, sz + dz*K) of
+        one colour, whose blocks are disjoint (one compiled body for all colours)."""
+        ti.loop_config(serialize=ti.static(self.serial_heavy))
+        for I in ti.grouped(ti.ndrange(nx, ny, nz)):
+            c = ti.Vector([sx + dx * I[0], sy + dy * I[1], sz + dz * I[2]])
+            k = self.grid.linear(c)
+            budget = self.active[k]
+            if budget > 0:
+                self.resolve_block(c, ti.min(budget, MAX_BLOCK_COLLISIONS))
+                self.active[k] = 0
+
+    @ti.kernel
+    def after_sweep(self):
+        """Put the spheres a sweep touched back inside the box, detect new approaching
+        overlaps around them, and clear their marks."""
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for i in range(self.n):
+            if self.state.modified[i]:
+                self.motion.walls_and_wrap(i)
+        self.params.reset_detection()
+        self.detect_from_modified()
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for i in range(self.n):
+            self.state.modified[i] = 0
+
+    def sweep(self):
+        """Resolve every colour in turn, then :meth:`after_sweep`."""
+        for colour in self.colours:
+            self.resolve_colour(*colour[0], *colour[1], *colour[2])
+        self.after_sweep()
+
+    # ---- debugging / tests ----
+    @ti.kernel
+    def _list_overlaps(self, out: ti.types.ndarray(), counter: ti.types.ndarray()):
+        """All overlapping approaching pairs (i < j) found with the grid, into out."""
+        for i in range(self.n):
+            ci = self.grid.coords(self.grid.cell_of[i])
+            for k in range(ti.static(len(FORWARD_OFFSETS))):
+                cj, ok = self.grid.shifted(ci, self.stencil[k])
+                if ok:
+                    kj = self.grid.linear(cj)
+                    for q in range(self.grid.start[kj], self.grid.start[kj + 1]):
+                        j = self.grid.order[q]
+                        if k > 0 or j > i:
+                            d, u, sigma = self.separation(i, j)
+                            dd = d.norm_sqr()
+                            if dd < sigma * sigma and self.approaching(dd, d.dot(u), u.norm_sqr()):
+                                slot = ti.atomic_add(counter[0], 1)
+                                if slot < out.shape[0]:
+                                    out[slot, 0] = ti.min(i, j)
+                                    out[slot, 1] = ti.max(i, j)
+
+    def list_overlaps(self, capacity=None):
+        """Sorted (K, 2) int array of overlapping approaching pairs seen by the grid."""
+        capacity = capacity or 8 * self.n + 16
+        out = np.zeros((capacity, 2), dtype=np.int32)
+        counter = np.zeros(1, dtype=np.int32)
+        self._list_overlaps(out, counter)
+        k = int(counter[0])
+        if k > capacity:
+            return self.list_overlaps(k)
+        pairs = out[:k]
+        return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
+
+    @ti.kernel
+    def _block_touches(self, sx: ti.i32, dx: ti.i32, nx: ti.i32, sy: ti.i32, dy: ti.i32,
+                       ny: ti.i32, sz: ti.i32, dz: ti.i32, nz: ti.i32,
+                       touches: ti.types.ndarray()):
+        """touches[i] += 1 for each owner cell of one colour whose block holds sphere i."""
+        for I in ti.grouped(ti.ndrange(nx, ny, nz)):
+            c = ti.Vector([sx + dx * I[0], sy + dy * I[1], sz + dz * I[2]])
+            for a in ti.static(range(2)):
+                for b in ti.static(range(2)):
+                    for e in ti.static(range(2)):
+                        cb, ok = self.grid.shifted(c, ti.Vector([a, b, e]))
+                        if ok:
+                            kb = self.grid.linear(cb)
+                            for q in range(self.grid.start[kb], self.grid.start[kb + 1]):
+                                ti.atomic_add(touches[self.grid.order[q]], 1)
+
+    def block_touches(self, colour_index):
+        """(N,) int: how many owner cells of colour ``colour_index`` may touch each sphere."""
+        touches = np.zeros(self.n, dtype=np.int32)
+        col = self.colours[colour_index]
+        self._block_touches(*col[0], *col[1], *col[2], touches)
+        return touches

@@ -1,0 +1,275 @@
+"""Uniform grid: cell geometry, colours, and a deterministic counting sort (step stage 2).
+
+Cells are at least the largest diameter plus a margin ``2 * slack`` wide, so every
+pair closer than contact lies in the same or adjacent cells even after the spheres
+have moved by up to ``slack`` since the grid was built.
+
+Ownership and colours (DESIGN.md, "Parallel step"): a pair of spheres in cells
+``a`` and ``b`` is *owned* by the cell ``c = lower(a, b)`` (component-wise lower,
+periodic-aware), so cell ``c`` only ever touches the 2x2x2 block ``c + {0,1}^3``.
+Cells whose coordinates have equal parity on every axis (8 colours) have disjoint
+blocks, so one thread per cell of one colour can update its spheres with no race.
+A periodic axis with an odd cell count gives its last cell a third colour on that
+axis (up to 27 colours), because cells ``n-1`` and ``0`` are neighbours there.
+``tests/test_grid.py`` checks both facts on the compiled kernels.
+"""
+
+import dataclasses
+import itertools
+import math
+
+import taichi as ti
+
+from .state import SphereState
+
+__all__ = ["GridGeometry", "Grid", "BLOCK_PAIRS", "FORWARD_OFFSETS", "SCAN_BLOCK"]
+
+SCAN_BLOCK = 1024
+
+
+def _block_pairs():
+    """Cell pairs (alpha, beta) inside the block c + {0,1}^3 whose lower cell is c.
+
+    alpha and beta have disjoint supports; the list starts with the cell itself
+    (0,0,0)-(0,0,0) and then has the 13 pairs of distinct cells.
+    """
+    cube = list(itertools.product((0, 1), repeat=3))
+    out = [((0, 0, 0), (0, 0, 0))]
+    seen = set()
+    for a in cube:
+        for b in cube:
+            if a == b or any(p and q for p, q in zip(a, b)):
+                continue
+            key = frozenset((a, b))
+            if key not in seen:
+                seen.add(key)
+                out.append((a, b))
+    assert len(out) == 14
+    return tuple(out)
+
+
+#: The 14 cell pairs a cell owns (itself + 13), as offsets from the owner.
+BLOCK_PAIRS = _block_pairs()
+#: Half stencil for detection: (0,0,0) and the 13 lexicographically positive offsets.
+FORWARD_OFFSETS = ((0, 0, 0),) + tuple(
+    o for o in itertools.product((-1, 0, 1), repeat=3) if o > (0, 0, 0))
+ALL_OFFSETS = tuple(itertools.product((-1, 0, 1), repeat=3))
+
+
+@dataclasses.dataclass(frozen=True)
+class GridGeometry:
+    """Cell layout of the box (pure Python, no Taichi).
+
+    lo: (3,) box corner [m]; cell: (3,) cell size per axis [m]; dims: (3,) cells per
+    axis; periodic: per-axis bools; slack: distance a sphere may move after the
+    grid was built before the grid must be rebuilt [m].
+    """
+
+    lo: tuple
+    cell: tuple
+    dims: tuple
+    periodic: tuple
+    slack: float
+
+    @classmethod
+    def for_box(cls, lo, hi, periodic, r_max, r_min, n, step_fraction):
+        slack = step_fraction * r_min
+        min_cell = 2.0 * r_max + 2.0 * slack
+        # no more cells than about one per sphere: dilute scenes keep memory O(N)
+        target = max(min_cell, (math.prod(h - l for l, h in zip(lo, hi)) / max(n, 1)) ** (1 / 3))
+        dims, cell = [], []
+        for a in range(3):
+            length = hi[a] - lo[a]
+            k = max(1, int(math.floor(length / target)))
+            if periodic[a] and k < 3:
+                k = int(math.floor(length / min_cell))
+                if k < 3:
+                    raise ValueError(
+                        f"periodic axis {'xyz'[a]}: box length {length:g} m must be at least 3 cells "
+                        f"of {min_cell:g} m (largest diameter {2 * r_max:g} m plus margin); "
+                        f"enlarge the box or use walls on that axis")
+            if periodic[a] and k % 2 == 1 and k > 3:
+                k -= 1   # even count: 2 colours on this axis instead of 3
+            dims.append(k)
+            cell.append(length / k)
+        return cls(lo=tuple(float(v) for v in lo), cell=tuple(cell), dims=tuple(dims),
+                   periodic=tuple(bool(p) for p in periodic), slack=slack)
+
+    @property
+    def n_cells(self) -> int:
+        return self.dims[0] * self.dims[1] * self.dims[2]
+
+    def axis_colours(self, a):
+        """Colours on axis a as (start, stride, count) of the cells that have it."""
+        n = self.dims[a]
+        if self.periodic[a] and n % 2 == 1:
+            return ((0, 2, (n - 1) // 2), (1, 2, (n - 1) // 2), (n - 1, 1, 1))
+        return tuple(c for c in ((0, 2, (n + 1) // 2), (1, 2, n // 2)) if c[2] > 0)
+
+    @property
+    def colours(self):
+        """All colours: tuples of three (start, stride, count), one per axis."""
+        return tuple(itertools.product(*(self.axis_colours(a) for a in range(3))))
+
+    def colour_cells(self, colour):
+        """Cell coordinates of one colour (Python mirror of the kernel loop)."""
+        axes = [range(s, s + d * k, d) for s, d, k in colour]
+        return list(itertools.product(*axes))
+
+
+@ti.data_oriented
+class Grid:
+    """Counting-sort cell list over a :class:`SphereState`.
+
+    Fields (M = number of cells, N = spheres):
+        start: (M+1,) i32 — exclusive prefix of cell counts; sphere ids of cell c are
+            ``order[start[c]:start[c+1]]``, sorted by id (deterministic on every arch)
+        order: (N,) i32 sphere ids by cell;  cell_of: (N,) i32 linear cell of sphere
+        cursor: (M,) i32 scatter cursors;  scan_levels: block sums of the scan
+    """
+
+    def __init__(self, geom: GridGeometry, state: SphereState, serial_light: bool):
+        self.geom = geom
+        self.state = state
+        self.real = state.real
+        self.n = state.n
+        self.m = geom.n_cells
+        self.serial_light = serial_light
+        self.start = ti.field(ti.i32, shape=self.m + 1)
+        self.cursor = ti.field(ti.i32, shape=self.m)
+        self.order = ti.field(ti.i32, shape=self.n)
+        self.cell_of = ti.field(ti.i32, shape=self.n)
+        # multi-level blocked exclusive scan: level k scans sizes[k] items of bufs[k]
+        self.scan_sizes = [self.m]
+        self.scan_bufs = [self.start]
+        while self.scan_sizes[-1] > SCAN_BLOCK:
+            size = -(-self.scan_sizes[-1] // SCAN_BLOCK)
+            self.scan_sizes.append(size)
+            self.scan_bufs.append(ti.field(ti.i32, shape=size))
+        self.lo = ti.Vector.field(3, self.real, shape=())
+        self.inv_cell = ti.Vector.field(3, self.real, shape=())
+        self.lo[None] = geom.lo
+        self.inv_cell[None] = [1.0 / c for c in geom.cell]
+
+    # ---- cell arithmetic (ti.func, all static in the geometry) ----
+    @ti.func
+    def coords_of_position(self, p):
+        """Cell coordinates (vec3 i32) of a point p [m], clamped into the grid."""
+        f = (p - self.lo[None]) * self.inv_cell[None]
+        c = ti.Vector([0, 0, 0])
+        for a in ti.static(range(3)):
+            c[a] = ti.min(ti.max(ti.cast(ti.floor(f[a]), ti.i32), 0), ti.static(self.geom.dims[a] - 1))
+        return c
+
+    @ti.func
+    def linear(self, c):
+        return (c[0] * ti.static(self.geom.dims[1]) + c[1]) * ti.static(self.geom.dims[2]) + c[2]
+
+    @ti.func
+    def coords(self, k):
+        nz = ti.static(self.geom.dims[2])
+        ny = ti.static(self.geom.dims[1])
+        return ti.Vector([k // (ny * nz), (k // nz) % ny, k % nz])
+
+    @ti.func
+    def shifted(self, c, off):
+        """Cell c + off (vec3 i32), wrapped on periodic axes; valid=False off the grid."""
+        out = c + off
+        valid = True
+        for a in ti.static(range(3)):
+            n = ti.static(self.geom.dims[a])
+            if ti.static(self.geom.periodic[a]):
+                if out[a] < 0:
+                    out[a] += n
+                elif out[a] >= n:
+                    out[a] -= n
+            else:
+                if out[a] < 0 or out[a] >= n:
+                    valid = False
+        return out, valid
+
+    @ti.func
+    def owner(self, ca, cb):
+        """Component-wise lower cell of two equal-or-adjacent cells (periodic-aware)."""
+        out = ca
+        for a in ti.static(range(3)):
+            if ca[a] != cb[a]:
+                if ti.static(self.geom.periodic[a]):
+                    n = ti.static(self.geom.dims[a])
+                    if (ca[a] + 1) % n != cb[a]:
+                        out[a] = cb[a]
+                elif cb[a] < ca[a]:
+                    out[a] = cb[a]
+        return out
+
+    # ---- build ----
+    @ti.func
+    def _exclusive_scan(self):
+        """In-place exclusive prefix sum of start[0:M] (blocked, every arch)."""
+        B = ti.static(SCAN_BLOCK)
+        levels = ti.static(len(self.scan_sizes))
+        for lv in ti.static(range(levels - 1)):
+            buf = ti.static(self.scan_bufs[lv])
+            nxt = ti.static(self.scan_bufs[lv + 1])
+            size = ti.static(self.scan_sizes[lv])
+            ti.loop_config(serialize=ti.static(self.serial_light or self.scan_sizes[lv + 1] < 8))
+            for b in range(ti.static(self.scan_sizes[lv + 1])):
+                acc = 0
+                for k in range(B):
+                    idx = b * B + k
+                    if idx < size:
+                        t = buf[idx]
+                        buf[idx] = acc
+                        acc += t
+                nxt[b] = acc
+        top = ti.static(self.scan_bufs[levels - 1])
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            acc = 0
+            for k in range(ti.static(self.scan_sizes[levels - 1])):
+                t = top[k]
+                top[k] = acc
+                acc += t
+        for lv in ti.static(range(levels - 2, -1, -1)):
+            buf = ti.static(self.scan_bufs[lv])
+            nxt = ti.static(self.scan_bufs[lv + 1])
+            ti.loop_config(serialize=ti.static(self.serial_light))
+            for idx in range(ti.static(self.scan_sizes[lv])):
+                buf[idx] += nxt[idx // B]
+
+    @ti.kernel
+    def build(self):
+        """Counting sort of spheres into cells: count, scan, scatter, sort each cell by id.
+
+        Also resets ``state.moved`` (distance moved since this build) to 0.
+        """
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for c in range(self.m + 1):
+            self.start[c] = 0
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for i in range(self.n):
+            k = self.linear(self.coords_of_position(self.state.x[i]))
+            self.cell_of[i] = k
+            ti.atomic_add(self.start[k], 1)
+            self.state.moved[i] = 0
+        self._exclusive_scan()
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for c in range(self.m):
+            self.cursor[c] = self.start[c]
+        self.start[self.m] = self.n
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for i in range(self.n):
+            slot = ti.atomic_add(self.cursor[self.cell_of[i]], 1)
+            self.order[slot] = i
+        # atomics scatter in a thread-dependent order: sort each cell by sphere id
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for c in range(self.m):
+            lo = self.start[c]
+            hi = self.start[c + 1]
+            for p in range(lo + 1, hi):
+                key = self.order[p]
+                q = p - 1
+                while q >= lo and self.order[q] > key:
+                    self.order[q + 1] = self.order[q]
+                    q -= 1
+                self.order[q + 1] = key

@@ -1,0 +1,28 @@
+"""Observe: diagnostics computed from a State snapshot (numpy, float64).
+
+Energies in J, momentum in kg m/s; potential energy is -m g.x (zero at the origin).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["kinetic_energy", "potential_energy", "momentum", "total_energy"]
+
+
+def kinetic_energy(state) -> float:
+    """sum_i m_i |v_i|^2 / 2 [J]."""
+    return float(0.5 * np.sum(state.mass * np.einsum("ij,ij->i", state.v, state.v)))
+
+
+def potential_energy(state, gravity) -> float:
+    """sum_i -m_i g.x_i [J] (gravity (3,) in m/s^2)."""
+    return float(-np.sum(state.mass * (state.x @ np.asarray(gravity, dtype=np.float64))))
+
+
+def total_energy(state, gravity) -> float:
+    return kinetic_energy(state) + potential_energy(state, gravity)
+
+
+def momentum(state) -> np.ndarray:
+    """sum_i m_i v_i, (3,) [kg m/s]."""
+    return (state.mass[:, None] * state.v).sum(axis=0)

@@ -1,0 +1,285 @@
+"""Scene: validated initial conditions and physical parameters (stage 1 of the data flow).
+
+A :class:`Scene` is plain numpy data (SI units, z up, positions are sphere centres).
+It never touches Taichi, so it can be built, checked and saved before ``ti.init``.
+Bad input raises ``ValueError`` naming the offending sphere index or argument;
+nothing is silently fixed.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+__all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE"]
+
+#: kg/m^3, used when neither ``mass`` nor ``density`` is given (water).
+DEFAULT_DENSITY = 1000.0
+#: Relative overlap allowed at set-up so that spheres given as exactly touching
+#: (distance == r_i + r_j up to decimal round-off) are accepted.
+TOUCH_TOLERANCE = 1e-10
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Scene:
+    """Initial state and physics of a hard-sphere system.
+
+    Attributes (all float64 numpy arrays unless noted):
+        x: (N, 3) centres [m];  v: (N, 3) velocities [m/s]
+        radius: (N,) [m];  mass: (N,) [kg]
+        box_lo, box_hi: (3,) box corners [m];  periodic: tuple of 3 bools
+        gravity: (3,) [m/s^2];  restitution: pair e;  wall_restitution: wall e
+        name: free text used in output file names and logs.
+    """
+
+    x: np.ndarray
+    v: np.ndarray
+    radius: np.ndarray
+    mass: np.ndarray
+    box_lo: np.ndarray
+    box_hi: np.ndarray
+    periodic: tuple
+    gravity: np.ndarray
+    restitution: float = 1.0
+    wall_restitution: float = 1.0
+    name: str = "scene"
+    #: settings read from a scene file that are not physics ([run], [physics] extras)
+    meta: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        """Number of spheres."""
+        return int(self.x.shape[0])
+
+    @property
+    def box_size(self) -> np.ndarray:
+        return self.box_hi - self.box_lo
+
+    @classmethod
+    def from_arrays(cls, x, v, radius, mass=None, density=None,
+                    box=((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)), periodic=(False, False, False),
+                    gravity=(0.0, 0.0, -9.81), restitution=1.0, wall_restitution=1.0,
+                    name="scene") -> "Scene":
+        """Build and validate a scene from arrays.
+
+        x, v: (N, 3) positions [m] and velocities [m/s]. radius: scalar or (N,) [m].
+        mass: scalar or (N,) [kg], or density: scalar or (N,) [kg/m^3] (mass = density
+        * 4/3 pi r^3); give at most one of them, neither means density 1000 kg/m^3.
+        box: ((xlo, ylo, zlo), (xhi, yhi, zhi)); periodic: per-axis bools.
+        Raises ValueError naming the argument or sphere index at fault.
+        """
+        x = _array("x", x, ndim=2)
+        n = x.shape[0]
+        if x.shape[1:] != (3,):
+            raise ValueError(f"x must have shape (N, 3), got {x.shape}")
+        if n == 0:
+            raise ValueError("x: a scene needs at least one sphere")
+        v = _array("v", v, ndim=2)
+        if v.shape != (n, 3):
+            raise ValueError(f"v must have shape ({n}, 3) like x, got {v.shape}")
+        radius = _per_sphere("radius", radius, n)
+        _finite_rows("x", x)
+        _finite_rows("v", v)
+        _positive("radius", radius)
+        if mass is not None and density is not None:
+            raise ValueError("give either mass or density, not both")
+        if mass is not None:
+            mass = _per_sphere("mass", mass, n)
+            _positive("mass", mass)
+        else:
+            dens = _per_sphere("density", DEFAULT_DENSITY if density is None else density, n)
+            _positive("density", dens)
+            mass = dens * (4.0 / 3.0) * math.pi * radius ** 3
+            _positive("mass (from density)", mass)
+        try:
+            lo, hi = box
+        except (TypeError, ValueError):
+            raise ValueError("box must be ((xlo, ylo, zlo), (xhi, yhi, zhi))") from None
+        lo = _vector3("box lower corner", lo)
+        hi = _vector3("box upper corner", hi)
+        for a in range(3):
+            if not hi[a] > lo[a]:
+                raise ValueError(f"box: upper corner must exceed lower corner on axis {'xyz'[a]} "
+                                 f"({lo[a]} .. {hi[a]})")
+        periodic = _periodic(periodic)
+        gravity = _vector3("gravity", gravity)
+        restitution = _restitution("restitution", restitution)
+        wall_restitution = _restitution("wall_restitution", wall_restitution)
+        _inside_box(x, radius, lo, hi, periodic)
+        _no_overlaps(x, radius, lo, hi, periodic)
+        return cls(x=x, v=v, radius=radius, mass=mass, box_lo=lo, box_hi=hi,
+                   periodic=periodic, gravity=gravity, restitution=restitution,
+                   wall_restitution=wall_restitution, name=str(name))
+
+    def replace(self, **changes) -> "Scene":
+        """A validated copy with some arguments of :meth:`from_arrays` changed."""
+        args = dict(x=self.x, v=self.v, radius=self.radius, mass=self.mass,
+                    box=(self.box_lo, self.box_hi), periodic=self.periodic,
+                    gravity=self.gravity, restitution=self.restitution,
+                    wall_restitution=self.wall_restitution, name=self.name)
+        if "density" in changes:
+            args.pop("mass")
+        args.update(changes)
+        return dataclasses.replace(Scene.from_arrays(**args), meta=dict(self.meta))
+
+
+def _array(name, value, ndim):
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: not numeric ({exc})") from None
+    if arr.ndim != ndim:
+        raise ValueError(f"{name} must be a {ndim}-d array, got shape {arr.shape}")
+    return arr
+
+
+def _per_sphere(name, value, n):
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name}: not numeric ({exc})") from None
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise ValueError(f"{name} must be a scalar or have shape ({n},), got {arr.shape}")
+    bad = np.flatnonzero(~np.isfinite(arr))
+    if bad.size:
+        raise ValueError(f"{name} of sphere {bad[0]} is not finite ({arr[bad[0]]})"
+                         + _more(bad))
+    return arr
+
+
+def _more(bad):
+    return f" (and {bad.size - 1} more)" if bad.size > 1 else ""
+
+
+def _finite_rows(name, arr):
+    bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
+    if bad.size:
+        raise ValueError(f"{name} of sphere {bad[0]} is not finite ({arr[bad[0]].tolist()})"
+                         + _more(bad))
+
+
+def _positive(name, arr):
+    bad = np.flatnonzero(~(arr > 0))
+    if bad.size:
+        raise ValueError(f"{name} of sphere {bad[0]} must be > 0, got {arr[bad[0]]}" + _more(bad))
+
+
+def _vector3(name, value):
+    try:
+        arr = np.array(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be three numbers, got {value!r}") from None
+    if arr.shape != (3,) or not np.isfinite(arr).all():
+        raise ValueError(f"{name} must be three finite numbers, got {value!r}")
+    return arr
+
+
+def _periodic(value):
+    if isinstance(value, (bool, np.bool_)):
+        return (bool(value),) * 3
+    try:
+        items = tuple(value)
+    except TypeError:
+        raise ValueError(f"periodic must be a bool or three bools, got {value!r}") from None
+    if len(items) != 3 or not all(isinstance(p, (bool, np.bool_)) for p in items):
+        raise ValueError(f"periodic must be a bool or three bools, got {value!r}")
+    return tuple(bool(p) for p in items)
+
+
+def _restitution(name, value):
+    try:
+        e = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number in [0, 1], got {value!r}") from None
+    if not 0.0 <= e <= 1.0:
+        raise ValueError(f"{name} must be in [0, 1], got {value!r}")
+    return e
+
+
+def _inside_box(x, radius, lo, hi, periodic):
+    for a in range(3):
+        if periodic[a]:
+            bad = np.flatnonzero((x[:, a] < lo[a]) | (x[:, a] >= hi[a]))
+            where = f"[{lo[a]}, {hi[a]}) on periodic axis {'xyz'[a]}"
+        else:
+            bad = np.flatnonzero((x[:, a] - radius < lo[a]) | (x[:, a] + radius > hi[a]))
+            where = f"the walls {lo[a]} .. {hi[a]} on axis {'xyz'[a]} (centre +- radius)"
+        if bad.size:
+            i = bad[0]
+            raise ValueError(f"sphere {i} (x={x[i].tolist()}, radius={radius[i]}) is outside "
+                             f"{where}" + _more(bad))
+
+
+def _no_overlaps(x, radius, lo, hi, periodic):
+    """Raise on the first overlapping pair, found with a cell list (O(N) for sane scenes)."""
+    i, j, dist = find_first_overlap(x, radius, lo, hi, periodic)
+    if i >= 0:
+        sigma = radius[i] + radius[j]
+        what = "have coincident centres" if dist == 0.0 else \
+            f"overlap: distance {dist:.17g} < r_i + r_j = {sigma:.17g}"
+        raise ValueError(f"spheres {i} and {j} {what}")
+
+
+def find_first_overlap(x, radius, lo, hi, periodic, tolerance=TOUCH_TOLERANCE):
+    """Lowest-index overlapping pair (i, j, distance) or (-1, -1, nan).
+
+    Vectorised cell list: cells of size >= the largest diameter, each sphere compared
+    with the members of its own and the 26 neighbouring cells (minimum image on
+    periodic axes). Overlap means distance < (r_i + r_j) (1 - tolerance).
+    """
+    n = x.shape[0]
+    if n < 2:
+        return -1, -1, float("nan")
+    size = hi - lo
+    cell = 2.0 * radius.max()
+    ncell = np.maximum(1, np.floor(size / cell)).astype(np.int64)
+    ncell = np.minimum(ncell, max(1, int(round(n ** (1 / 3))) * 4))
+    c = np.floor((x - lo) / size * ncell).astype(np.int64)
+    c = np.clip(c, 0, ncell - 1)
+    key = (c[:, 0] * ncell[1] + c[:, 1]) * ncell[2] + c[:, 2]
+    order = np.argsort(key, kind="stable")
+    skey = key[order]
+    best = None
+    offsets = [(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)]
+    seen_keys = set()
+    for off in offsets:
+        nb = c + np.array(off)
+        valid = np.ones(n, dtype=bool)
+        for a in range(3):
+            if periodic[a]:
+                nb[:, a] %= ncell[a]
+            else:
+                valid &= (nb[:, a] >= 0) & (nb[:, a] < ncell[a])
+        nkey = (nb[:, 0] * ncell[1] + nb[:, 1]) * ncell[2] + nb[:, 2]
+        # on axes with fewer than 3 cells several offsets name the same cell: visit it once
+        sig = tuple(off[a] % ncell[a] if periodic[a] else off[a] for a in range(3))
+        if sig in seen_keys:
+            continue
+        seen_keys.add(sig)
+        start = np.searchsorted(skey, nkey, side="left")
+        stop = np.searchsorted(skey, nkey, side="right")
+        stop = np.where(valid, stop, start)
+        count = stop - start
+        for m in range(int(count.max()) if n else 0):
+            sel = np.flatnonzero(count > m)
+            jj = order[start[sel] + m]
+            ii = sel
+            keep = jj > ii
+            ii, jj = ii[keep], jj[keep]
+            d = x[ii] - x[jj]
+            for a in range(3):
+                if periodic[a]:
+                    d[:, a] -= size[a] * np.round(d[:, a] / size[a])
+            dist = np.sqrt((d * d).sum(axis=1))
+            sig2 = (radius[ii] + radius[jj]) * (1.0 - tolerance)
+            hit = np.flatnonzero(dist < sig2)
+            if hit.size:
+                cand = sorted(zip(ii[hit].tolist(), jj[hit].tolist(), dist[hit].tolist()))[0]
+                if best is None or cand[:2] < best[:2]:
+                    best = cand
+    if best is None:
+        return -1, -1, float("nan")
+    return best

@@ -1,0 +1,267 @@
+"""Scene files (TOML) -> validated :class:`Scene`.
+
+Strict schema: unknown keys are rejected with the nearest valid name, wrong types
+are named, and every problem in the file is reported at once in one ValueError.
+Units are SI, z is up. See README "Scene files" for every key and its default.
+
+    name = "seed_five"
+    [box]      lo, hi (3 numbers, m), periodic (3 bools), wall_restitution
+    [physics]  gravity (m/s^2), restitution, step_fraction, max_sweeps, precision
+    [run]      duration (s), fps
+    [[spheres]]  one sphere: x, v, radius, and mass or density
+    [[lattice]]  a simple-cubic block: lo, hi, spacing, radius, mass|density,
+                 v (velocity of all) or speed (random directions), seed
+    [[random]]   count spheres at random non-overlapping places in a region
+                 (lo, hi), radius, mass|density, v | speed, seed
+"""
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+try:
+    import tomllib
+except ImportError:  # Python 3.10
+    import tomli as tomllib
+
+import numpy as np
+
+from .scene import DEFAULT_DENSITY, Scene
+
+__all__ = ["load_scene", "scene_from_dict", "SceneFileError"]
+
+_TOP = {"name": str, "box": dict, "physics": dict, "run": dict,
+        "spheres": list, "lattice": list, "random": list}
+_BOX = {"lo": "vec3", "hi": "vec3", "periodic": "bool3", "wall_restitution": float}
+_PHYSICS = {"gravity": "vec3", "restitution": float, "step_fraction": float,
+            "max_sweeps": int, "precision": str}
+_RUN = {"duration": float, "fps": float}
+_SPHERE = {"x": "vec3", "v": "vec3", "radius": float, "mass": float, "density": float}
+_LATTICE = {"lo": "vec3", "hi": "vec3", "spacing": float, "radius": float, "mass": float,
+            "density": float, "v": "vec3", "speed": float, "seed": int}
+_RANDOM = {"count": int, "lo": "vec3", "hi": "vec3", "radius": float, "mass": float,
+           "density": float, "v": "vec3", "speed": float, "seed": int}
+
+
+class SceneFileError(ValueError):
+    """All problems found in a scene file (``problems``: list of strings)."""
+
+    def __init__(self, source, problems):
+        self.problems = list(problems)
+        super().__init__(f"{source}: {len(self.problems)} problem(s):\n  - "
+                         + "\n  - ".join(self.problems))
+
+
+def load_scene(path) -> Scene:
+    """Read a TOML scene file and return a validated Scene (``scene.meta`` holds the
+    [run] and [physics] settings that are not part of the Scene itself)."""
+    path = str(path)
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ValueError(f"scene file not found: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneFileError(path, [f"not valid TOML: {exc}"]) from None
+    return scene_from_dict(data, source=path)
+
+
+def scene_from_dict(data: dict, source="scene") -> Scene:
+    problems: list = []
+    _check_table(data, _TOP, "", problems)
+    box = _table(data, "box", _BOX, problems)
+    physics = _table(data, "physics", _PHYSICS, problems)
+    run = _table(data, "run", _RUN, problems)
+    groups = []
+    for key, schema in (("spheres", _SPHERE), ("lattice", _LATTICE), ("random", _RANDOM)):
+        items = data.get(key, [])
+        if not isinstance(items, list):
+            continue
+        for k, item in enumerate(items):
+            where = f"{key}[{k}]"
+            if not isinstance(item, dict):
+                problems.append(f"{where}: must be a table ([[{key}]])")
+                continue
+            _check_table(item, schema, where + ".", problems)
+            groups.append((key, where, item))
+    lo = box.get("lo", [0.0, 0.0, 0.0])
+    hi = box.get("hi", [1.0, 1.0, 1.0])
+    if "precision" in physics and physics["precision"] not in ("f32", "f64"):
+        problems.append(f"physics.precision: must be \"f32\" or \"f64\", got {physics['precision']!r}")
+    if not groups and not problems:
+        problems.append("no spheres: add [[spheres]], [[lattice]] or [[random]] tables")
+    arrays = {"x": [], "v": [], "radius": [], "mass": []}
+    if not problems:
+        for kind, where, item in groups:
+            try:
+                _generate(kind, where, item, lo, hi, arrays, problems)
+            except ValueError as exc:
+                problems.append(f"{where}: {exc}")
+    if problems:
+        raise SceneFileError(source, problems)
+    try:
+        scene = Scene.from_arrays(
+            np.concatenate(arrays["x"]), np.concatenate(arrays["v"]),
+            np.concatenate(arrays["radius"]), mass=np.concatenate(arrays["mass"]),
+            box=(lo, hi), periodic=box.get("periodic", [False, False, False]),
+            gravity=physics.get("gravity", [0.0, 0.0, -9.81]),
+            restitution=physics.get("restitution", 1.0),
+            wall_restitution=box.get("wall_restitution", 1.0),
+            name=data.get("name", "scene"))
+    except ValueError as exc:
+        raise SceneFileError(source, [str(exc)]) from None
+    meta = {"run": run, "physics": physics, "source": source}
+    return dataclasses.replace(scene, meta=meta)
+
+
+def _table(data, key, schema, problems):
+    t = data.get(key, {})
+    if not isinstance(t, dict):
+        return {}
+    _check_table(t, schema, key + ".", problems)
+    return t
+
+
+def _check_table(table, schema, prefix, problems):
+    for key, value in table.items():
+        if key not in schema:
+            near = difflib.get_close_matches(key, list(schema), n=1)
+            hint = f" (did you mean '{prefix}{near[0]}'?)" if near else \
+                f" (valid: {', '.join(sorted(schema))})"
+            problems.append(f"unknown key '{prefix}{key}'{hint}")
+            continue
+        msg = _type_problem(value, schema[key])
+        if msg:
+            problems.append(f"{prefix}{key}: {msg}")
+
+
+def _type_problem(value, kind):
+    if kind == "vec3":
+        if not (isinstance(value, list) and len(value) == 3
+                and all(_is_number(c) for c in value)):
+            return f"must be 3 finite numbers, got {value!r}"
+    elif kind == "bool3":
+        if isinstance(value, bool):
+            return None
+        if not (isinstance(value, list) and len(value) == 3
+                and all(isinstance(c, bool) for c in value)):
+            return f"must be a bool or 3 bools, got {value!r}"
+    elif kind is float:
+        if not _is_number(value):
+            return f"must be a number, got {value!r}"
+    elif kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            return f"must be an integer, got {value!r}"
+    elif not isinstance(value, kind):
+        return f"must be a {kind.__name__}, got {value!r}"
+    return None
+
+
+def _is_number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _mass_of(item, radius, where, count):
+    if "mass" in item and "density" in item:
+        raise ValueError("give mass or density, not both")
+    if "mass" in item:
+        return np.full(count, float(item["mass"]))
+    dens = float(item.get("density", DEFAULT_DENSITY))
+    return np.full(count, dens * 4.0 / 3.0 * math.pi * radius ** 3)
+
+
+def _velocities(item, count, rng):
+    if "v" in item and "speed" in item:
+        raise ValueError("give v or speed, not both")
+    if "speed" in item:
+        d = rng.normal(size=(count, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        return float(item["speed"]) * d
+    return np.tile(np.asarray(item.get("v", [0.0, 0.0, 0.0]), dtype=np.float64), (count, 1))
+
+
+def _need(item, keys, where):
+    missing = [k for k in keys if k not in item]
+    if missing:
+        raise ValueError("missing " + ", ".join(f"'{k}'" for k in missing))
+
+
+def _generate(kind, where, item, box_lo, box_hi, arrays, problems):
+    rng = np.random.default_rng(item.get("seed", 0))
+    if kind == "spheres":
+        _need(item, ("x", "radius"), where)
+        x = np.asarray([item["x"]], dtype=np.float64)
+        count = 1
+    elif kind == "lattice":
+        _need(item, ("radius",), where)
+        lo = np.asarray(item.get("lo", box_lo), dtype=np.float64)
+        hi = np.asarray(item.get("hi", box_hi), dtype=np.float64)
+        r = float(item["radius"])
+        spacing = float(item.get("spacing", 2.2 * r))
+        if spacing < 2 * r:
+            raise ValueError(f"spacing {spacing} is less than the diameter {2 * r}")
+        axes = [np.arange(lo[a] + r, hi[a] - r + 1e-12 * spacing, spacing) for a in range(3)]
+        if any(len(ax) == 0 for ax in axes):
+            raise ValueError("region too small for one sphere")
+        x = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+        count = len(x)
+    else:
+        _need(item, ("count", "radius"), where)
+        count = int(item["count"])
+        if count < 1:
+            raise ValueError("count must be >= 1")
+        lo = np.asarray(item.get("lo", box_lo), dtype=np.float64)
+        hi = np.asarray(item.get("hi", box_hi), dtype=np.float64)
+        x = random_positions(count, float(item["radius"]), lo, hi, rng,
+                             existing=(arrays["x"], arrays["radius"]))
+    radius = np.full(count, float(item["radius"]))
+    arrays["x"].append(x)
+    arrays["v"].append(_velocities(item, count, rng))
+    arrays["radius"].append(radius)
+    arrays["mass"].append(_mass_of(item, radius, where, count))
+
+
+def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=200):
+    """count non-overlapping centres of spheres of one radius inside [lo, hi]
+    (random sequential addition on a hash grid; raises if the region is too full)."""
+    lo = lo + radius
+    hi = hi - radius
+    if np.any(hi < lo):
+        raise ValueError("region too small for one sphere")
+    prev_x = np.concatenate(list(existing[0])) if len(existing[0]) else np.zeros((0, 3))
+    prev_r = np.concatenate(list(existing[1])) if len(existing[1]) else np.zeros(0)
+    cell = 2.0 * max(radius, prev_r.max() if prev_r.size else 0.0)
+    buckets: dict = {}
+
+    def key(p):
+        return tuple(np.floor(p / cell).astype(np.int64))
+
+    for p, r in zip(prev_x, prev_r):
+        buckets.setdefault(key(p), []).append((p, r))
+    out = np.empty((count, 3))
+    for k in range(count):
+        for _ in range(max_tries):
+            p = lo + rng.random(3) * (hi - lo)
+            c = key(p)
+            ok = True
+            for dx in (-1, 0, 1):
+                for dy in (-1, 0, 1):
+                    for dz in (-1, 0, 1):
+                        for q, rq in buckets.get((c[0] + dx, c[1] + dy, c[2] + dz), ()):
+                            if np.sum((p - q) ** 2) < (radius + rq) ** 2:
+                                ok = False
+                                break
+                        if not ok:
+                            break
+                    if not ok:
+                        break
+                if not ok:
+                    break
+            if ok:
+                out[k] = p
+                buckets.setdefault(c, []).append((p, radius))
+                break
+        else:
+            raise ValueError(f"could not place sphere {k} of {count} without overlap after "
+                             f"{max_tries} tries: the region is too full")
+    return out

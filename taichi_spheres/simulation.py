@@ -1,0 +1,223 @@
+"""Simulation: the public engine object (scene -> state -> step loop).
+
+One step of length h (DESIGN.md "Parallel step"):
+  1. drift every sphere on its exact ballistic path and apply walls (walls.py);
+  2. build the uniform grid with a deterministic counting sort (grid.py);
+  3. detect overlapping approaching pairs in parallel (contacts.py);
+  4. sweep: resolve them colour by colour, rewinding each pair to contact; repeat
+     detection around the spheres that changed until none is left or
+     ``max_sweeps`` is reached; what is left is counted in ``stats['unresolved']``.
+  5. adaptive h: no sphere moves more than ``step_fraction`` x the smallest radius
+     in one step (including the g h^2/2 of gravity), and steps end exactly on the
+     times asked for.
+"""
+from __future__ import annotations
+
+import math
+import time as _time
+
+import numpy as np
+import taichi as ti
+
+from . import runtime
+from .contacts import Contacts
+from .grid import Grid, GridGeometry
+from .params import (MOVED, N_COUNTS, OPEN_OVERLAP, PAIRS, REMAINING, SEP_OVERLAP, VMAX2,
+                     WALL_RESTS, WALLS, StepParams)
+from .scene import Scene
+from .state import Features, SphereState, State
+from .walls import Motion
+
+__all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS"]
+
+#: Default largest move per step as a fraction of the smallest radius. Two spheres
+#: then close in by at most 0.2 r per step, so a pair can only pass through each
+#: other unseen if its chord through the overlap is shorter than that: impact
+#: parameters within (0.1)^2/4 = 0.25 % of sigma^2 of grazing, which exchange almost
+#: no momentum. Tighter values trade speed for accuracy (tools/work_precision.py).
+DEFAULT_STEP_FRACTION = 0.1
+#: Default limit on detect/resolve sweeps per step.
+DEFAULT_MAX_SWEEPS = 32
+# below these sphere counts CPU loops run serially: Taichi's CPU parallel-for costs
+# ~150 us per launch, more than the whole loop for small N
+_SERIAL_LIGHT_BELOW = 200_000
+_SERIAL_HEAVY_BELOW = 3_000
+
+
+class Simulation:
+    """Hard-sphere simulation of a :class:`Scene` on a Taichi backend.
+
+    arch: 'cpu' | 'gpu' | 'cuda' | 'vulkan' | 'metal'. precision: 'f64' (default on
+    cpu/cuda) or 'f32' (default on vulkan/metal). step_fraction: largest move per
+    step / smallest radius, in (0, 1]. max_sweeps: detect/resolve sweeps per step.
+    threads: CPU threads (None: Taichi's default).
+    """
+
+    def __init__(self, scene: Scene, arch: str = "cpu", precision: str | None = None,
+                 step_fraction: float = DEFAULT_STEP_FRACTION,
+                 max_sweeps: int = DEFAULT_MAX_SWEEPS, threads: int | None = None):
+        if not isinstance(scene, Scene):
+            raise ValueError(f"scene must be a taichi_spheres.Scene, got {type(scene).__name__}")
+        step_fraction = float(step_fraction)
+        if not (0.0 < step_fraction <= 1.0):
+            raise ValueError(f"step_fraction must be in (0, 1], got {step_fraction}")
+        if not isinstance(max_sweeps, int) or max_sweeps < 1:
+            raise ValueError(f"max_sweeps must be a positive int, got {max_sweeps!r}")
+        self.scene = scene
+        self.step_fraction = step_fraction
+        self.max_sweeps = max_sweeps
+        self.features = Features.from_scene(scene)
+        self.geometry = GridGeometry.for_box(
+            scene.box_lo, scene.box_hi, scene.periodic, float(scene.radius.max()),
+            float(scene.radius.min()), scene.n, step_fraction)
+        self.runtime = runtime.ensure(arch, precision, threads)
+        self.precision = self.runtime.precision
+        real = ti.f64 if self.precision == "f64" else ti.f32
+        n = scene.n
+        cpu = self.runtime.is_cpu
+        serial_light = cpu and n < _SERIAL_LIGHT_BELOW
+        serial_heavy = cpu and n < _SERIAL_HEAVY_BELOW
+        self._state = SphereState(scene, self.features, real)
+        self._params = StepParams(scene, real)
+        self._motion = Motion(self._state, self._params, self.features, serial_light)
+        self._grid = Grid(self.geometry, self._state, serial_light)
+        self._contacts = Contacts(self._state, self._grid, self._params, self._motion,
+                                  self.features, serial_light, serial_heavy)
+        self._r_min = float(scene.radius.min())
+        self._g = float(np.linalg.norm(scene.gravity))
+        self.time = 0.0
+        self._totals = dict(steps=0, pair_collisions=0, wall_collisions=0, wall_rests=0,
+                            sweeps=0, unresolved=0, max_overlap=0.0, sweep_limit_hits=0,
+                            grid_rebuilds=0)
+        self.last_step = dict(h=0.0, unresolved=0, max_overlap=0.0, sweeps=0)
+        self.sim_seconds = 0.0   # wall-clock time spent in advance()
+        self._motion.measure_vmax()
+        self._vmax2 = float(self._params.vals[VMAX2])
+
+    # ---- public API ----
+    @property
+    def n(self) -> int:
+        return self.scene.n
+
+    @property
+    def stats(self) -> dict:
+        """Counters since the start: steps, pair_collisions, wall_collisions, sweeps,
+        max_overlap (largest overlap left after a step / contact distance),
+        unresolved (approaching overlaps left when a step hit the sweep limit, summed
+        over steps), wall_rests, sweep_limit_hits, grid_rebuilds; plus time and dt."""
+        out = dict(self._totals)
+        out["time"] = self.time
+        out["dt"] = self.last_step["h"]
+        return out
+
+    def state(self) -> State:
+        """Numpy (float64) copy of positions, velocities, radii, masses and time."""
+        self._check()
+        return State(x=self._state.positions(), v=self._state.velocities(),
+                     radius=self.scene.radius.copy(), mass=self.scene.mass.copy(),
+                     time=self.time)
+
+    def set_state(self, x, v, time=None):
+        """Overwrite positions and velocities (e.g. from a checkpoint); no validation
+        beyond shapes, the caller owns the physics."""
+        self._check()
+        x = np.asarray(x, dtype=np.float64)
+        v = np.asarray(v, dtype=np.float64)
+        if x.shape != (self.n, 3) or v.shape != (self.n, 3):
+            raise ValueError(f"x and v must have shape ({self.n}, 3)")
+        self._state.load(x, v, self.scene.radius, self.scene.mass)
+        if time is not None:
+            self.time = float(time)
+        self._motion.measure_vmax()
+        self._vmax2 = float(self._params.vals[VMAX2])
+
+    def advance(self, duration: float) -> None:
+        """Advance simulated time by ``duration`` seconds with adaptive steps."""
+        duration = float(duration)
+        if not (duration >= 0.0) or not math.isfinite(duration):
+            raise ValueError(f"duration must be a finite number >= 0, got {duration}")
+        self.advance_to(self.time + duration)
+
+    def advance_to(self, t_end: float) -> None:
+        """Advance to the absolute time ``t_end`` [s]; the last step ends exactly there."""
+        self._check()
+        t_end = float(t_end)
+        if not math.isfinite(t_end) or t_end < self.time:
+            raise ValueError(f"cannot advance to t={t_end} from t={self.time}")
+        t0 = _time.perf_counter()
+        while self.time < t_end:
+            h = self.max_step()
+            remaining = t_end - self.time
+            last = h >= remaining
+            if last:
+                h = remaining
+            self.step(h)
+            self.time = t_end if last else self.time + h
+        self.sim_seconds += _time.perf_counter() - t0
+
+    def max_step(self) -> float:
+        """Largest h such that no sphere moves more than step_fraction * r_min [s]:
+        v_max h + g h^2/2 <= D, i.e. h = 2 D / (v_max + sqrt(v_max^2 + 2 g D))."""
+        dist = self.step_fraction * self._r_min
+        vmax = math.sqrt(max(self._vmax2, 0.0))
+        denom = vmax + math.sqrt(vmax * vmax + 2.0 * self._g * dist)
+        return math.inf if denom == 0.0 else 2.0 * dist / denom
+
+    def step(self, h: float) -> None:
+        """One step of length h [s] (does not advance ``time``; use advance)."""
+        self._params.h[None] = h
+        self._motion.drift()
+        self._grid.build()
+        self._contacts.detect_all()
+        count = self._params.count
+        vals = self._params.vals
+        remaining = count[REMAINING]
+        sweeps = 0
+        while remaining > 0 and sweeps < self.max_sweeps:
+            self._contacts.sweep()
+            sweeps += 1
+            remaining = count[REMAINING]
+            if remaining > 0 and vals[MOVED] > self.geometry.slack:
+                # spheres moved too far from their cells for the margin: re-bin
+                self._grid.build()
+                self._contacts.detect_all()
+                vals[MOVED] = 0
+                remaining = count[REMAINING]
+                self._totals["grid_rebuilds"] += 1
+        counts = [count[k] for k in range(N_COUNTS)]
+        t = self._totals
+        t["steps"] += 1
+        t["sweeps"] += sweeps
+        t["pair_collisions"] += counts[PAIRS]
+        t["wall_collisions"] += counts[WALLS]
+        t["wall_rests"] += counts[WALL_RESTS]
+        overlap = float(vals[SEP_OVERLAP])
+        if remaining > 0:
+            t["unresolved"] += remaining
+            t["sweep_limit_hits"] += 1
+            overlap = max(overlap, float(vals[OPEN_OVERLAP]))
+        t["max_overlap"] = max(t["max_overlap"], overlap)
+        self._vmax2 = float(vals[VMAX2])
+        self.last_step = dict(h=h, unresolved=remaining, max_overlap=overlap, sweeps=sweeps,
+                              pair_collisions=counts[PAIRS], wall_collisions=counts[WALLS])
+
+    # ---- introspection used by tests and tools ----
+    def grid_overlaps(self) -> np.ndarray:
+        """Rebuild the grid at the current state and list overlapping approaching pairs
+        (K, 2) sorted — for comparing the grid with brute force."""
+        self._check()
+        self._grid.build()
+        return self._contacts.list_overlaps()
+
+    def describe(self) -> list:
+        """Lines describing arch, precision, grid and compiled features."""
+        g = self.geometry
+        return [f"arch: {self.runtime.arch} (Taichi {self.runtime.actual}), "
+                f"precision: {self.precision}",
+                f"spheres: {self.n}, grid: {g.dims[0]}x{g.dims[1]}x{g.dims[2]} cells of "
+                f"{' x '.join(f'{c:.4g}' for c in g.cell)} m, {len(g.colours)} colours",
+                f"step_fraction: {self.step_fraction}, max_sweeps: {self.max_sweeps}"] + \
+            self.features.describe()
+
+    def _check(self):
+        runtime.check(self.runtime)

@@ -1,0 +1,161 @@
+"""Free flight and walls (step stage 1): exact ballistic drift, exact wall rewind.
+
+Free flight (DESIGN.md "Physics"): ``x += v h + g h^2/2``, ``v += g h``.
+
+Walls: each axis moves independently, so a sphere that ends a step past a wall on
+axis ``a`` is rewound along its own ballistic path to the contact time: with
+``d < 0`` the signed distance past the contact plane (inside positive), ``w`` the
+velocity and ``g`` the acceleration along the inward normal, the time since
+contact ``s`` is the smallest root of ``g/2 s^2 - w s + d = 0`` at which the
+sphere was moving into the wall (``w - g s < 0``). The normal velocity at contact
+is reversed and scaled by the wall restitution, and the sphere is carried forward
+by ``s`` on its new path. A sphere that re-crosses within the same step (small e
+under gravity) bounces again, up to ``MAX_WALL_BOUNCES`` times; if it is still
+past the wall then, or its penetration is not explained by a crossing on its
+ballistic path (pushed there by a pair collision), it is put on the wall and its
+velocity into the wall is zeroed — a "wall rest" that never adds kinetic energy
+and is counted in ``stats['wall_rests']``.
+"""
+
+import taichi as ti
+
+from .params import VMAX2, WALLS, WALL_RESTS, StepParams
+from .state import Features, SphereState
+
+MAX_WALL_BOUNCES = 8
+
+
+@ti.data_oriented
+class Motion:
+    """Drift and wall kernels over a :class:`SphereState` (shapes: see SphereState)."""
+
+    def __init__(self, state: SphereState, params: StepParams, features: Features,
+                 serial_light: bool):
+        self.state = state
+        self.params = params
+        self.f = features
+        self.real = state.real
+        self.n = state.n
+        self.serial_light = serial_light
+
+    @ti.func
+    def _contact_time(self, d, w, acc, accelerated: ti.template()):
+        """Time since wall contact s >= 0 (or -1 if none) for inward distance d < 0,
+        inward velocity w and inward acceleration acc: root of acc/2 s^2 - w s + d = 0
+        with w - acc s < 0, computed without cancellation."""
+        s = ti.cast(-1, self.real)
+        if ti.static(not accelerated):
+            if w < 0:
+                s = d / w
+        elif acc == 0:
+            if w < 0:
+                s = d / w
+        else:
+            a2 = acc * ti.cast(0.5, self.real)
+            b = -w
+            disc = b * b - 4 * a2 * d
+            if disc >= 0:
+                sq = ti.sqrt(disc)
+                q = -ti.cast(0.5, self.real) * (b + (sq if b >= 0 else -sq))
+                r1 = ti.cast(-1, self.real)
+                r2 = ti.cast(-1, self.real)
+                if q != 0:
+                    r1 = q / a2
+                    r2 = d / q
+                for root in ti.static((0, 1)):
+                    r = r1 if root == 0 else r2
+                    if r >= 0 and w - acc * r < 0 and (s < 0 or r < s):
+                        s = r
+        return s
+
+    @ti.func
+    def walls_and_wrap(self, i):
+        """Bring sphere i back inside the box: wrap periodic axes, bounce off walls."""
+        x = self.state.x[i]
+        v = self.state.v[i]
+        for a in ti.static(range(3)):
+            if ti.static(not self.f.wall_axes[a]):
+                if x[a] < self.params.lo[None][a]:
+                    x[a] += self.params.size[None][a]
+                elif x[a] >= self.params.hi[None][a]:
+                    x[a] -= self.params.size[None][a]
+        if ti.static(self.f.walls):
+            r = self.state.rad(i)
+            h = self.params.h[None]
+            moved = ti.cast(0, self.real)
+            e_w = ti.cast(1, self.real)
+            if ti.static(not self.f.elastic_walls):
+                e_w = self.params.e_wall[None]
+            for a in ti.static(range(3)):
+                if ti.static(self.f.wall_axes[a]):
+                    g_a = ti.cast(0, self.real)
+                    if ti.static(self.f.gravity_axes[a]):
+                        g_a = self.params.gravity[None][a]
+                    lo_c = self.params.lo[None][a] + r
+                    hi_c = self.params.hi[None][a] - r
+                    for bounce in range(MAX_WALL_BOUNCES + 1):
+                        side = 0
+                        d = ti.cast(0, self.real)
+                        if x[a] < lo_c:
+                            side = -1
+                            d = x[a] - lo_c
+                        elif x[a] > hi_c:
+                            side = 1
+                            d = hi_c - x[a]
+                        if side == 0:
+                            break
+                        w = v[a] * side * -1
+                        acc = g_a * side * -1
+                        s = self._contact_time(d, w, acc, self.f.gravity_axes[a])
+                        bounced = False
+                        if s >= 0 and s <= 2 * h and bounce < MAX_WALL_BOUNCES:
+                            wc = w - acc * s
+                            wn = -e_w * wc
+                            dn = wn * s + ti.cast(0.5, self.real) * acc * s * s
+                            if side < 0:
+                                x[a] = lo_c + dn
+                            else:
+                                x[a] = hi_c - dn
+                            v[a] = (wn + acc * s) * side * -1
+                            moved += (wn - wc) * s
+                            ti.atomic_add(self.params.count[WALLS], 1)
+                            bounced = True
+                        if not bounced:
+                            # not a ballistic crossing, or bounced out: rest on the wall
+                            if side < 0:
+                                x[a] = lo_c
+                                v[a] = ti.max(v[a], 0)
+                            else:
+                                x[a] = hi_c
+                                v[a] = ti.min(v[a], 0)
+                            ti.atomic_add(self.params.count[WALL_RESTS], 1)
+                            break
+            self.state.moved[i] += moved
+        self.state.x[i] = x
+        self.state.v[i] = v
+
+    @ti.kernel
+    def drift(self):
+        """Advance every sphere by h on its exact ballistic path, then apply walls.
+
+        Resets the per-step counters; records max |v|^2 for the next step size.
+        """
+        self.params.reset_step()
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for i in range(self.n):
+            h = self.params.h[None]
+            if ti.static(self.f.gravity):
+                grav = self.params.gravity[None]
+                self.state.x[i] += self.state.v[i] * h + ti.cast(0.5, self.real) * grav * h * h
+                self.state.v[i] += grav * h
+            else:
+                self.state.x[i] += self.state.v[i] * h
+            self.walls_and_wrap(i)
+            ti.atomic_max(self.params.vals[VMAX2], self.state.v[i].norm_sqr())
+
+    @ti.kernel
+    def measure_vmax(self):
+        """vals[VMAX2] = max |v|^2 over all spheres [m^2/s^2]."""
+        self.params.vals[VMAX2] = 0
+        for i in range(self.n):
+            ti.atomic_max(self.params.vals[VMAX2], self.state.v[i].norm_sqr())

@@ -1,0 +1,42 @@
+"""Test configuration: the arch comes from a fixture, never from import-time ti.init.
+
+``--arch`` picks the backend (default cpu); ``--slow`` enables long validation runs.
+Tolerances depend on precision: ``tol`` scales a relative tolerance by the machine
+epsilon of the precision under test.
+"""
+import numpy as np
+import pytest
+
+
+def pytest_addoption(parser):
+    parser.addoption("--arch", default="cpu", help="Taichi arch for the tests (cpu|cuda|vulkan|metal|gpu)")
+    parser.addoption("--slow", action="store_true", default=False, help="run slow validation tests")
+
+
+def pytest_collection_modifyitems(config, items):
+    if config.getoption("--slow"):
+        return
+    skip = pytest.mark.skip(reason="slow validation run: use --slow")
+    for item in items:
+        if "slow" in item.keywords:
+            item.add_marker(skip)
+
+
+@pytest.fixture(scope="session")
+def arch(request):
+    return request.config.getoption("--arch")
+
+
+EPS = {"f64": float(np.finfo(np.float64).eps), "f32": float(np.finfo(np.float32).eps)}
+
+
+@pytest.fixture(params=["f64", "f32"])
+def precision(request, arch):
+    if request.param == "f64" and arch in ("metal",):
+        pytest.skip("no f64 on this arch")
+    return request.param
+
+
+def tol(precision, factor=1.0):
+    """Relative tolerance: factor x machine epsilon of the precision."""
+    return factor * EPS[precision]
