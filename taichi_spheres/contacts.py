@@ -23,7 +23,7 @@ next sweep.
 import numpy as np
 import taichi as ti
 
-from .grid import BLOCK_PAIRS, FORWARD_OFFSETS, Grid
+from .grid import ALL_ROWS, BLOCK_PAIRS, FORWARD_OFFSETS, FORWARD_ROWS, Grid
 from .params import MOVED, OPEN_OVERLAP, PAIRS, REMAINING, SEP_OVERLAP, VMAX2, StepParams
 from .state import Features, SphereState
 from .walls import Motion
@@ -61,6 +61,10 @@ class Contacts:
         # compile time); STENCIL = (0,0,0), 13 forward offsets, then their negatives
         self.stencil = ti.Vector.field(3, ti.i32, shape=len(STENCIL))
         self.stencil.from_numpy(np.array(STENCIL, dtype=np.int32))
+        self.fwd_rows = ti.Vector.field(4, ti.i32, shape=len(FORWARD_ROWS))
+        self.fwd_rows.from_numpy(np.array(FORWARD_ROWS, dtype=np.int32))
+        self.all_rows = ti.Vector.field(4, ti.i32, shape=len(ALL_ROWS))
+        self.all_rows.from_numpy(np.array(ALL_ROWS, dtype=np.int32))
         self.block = ti.Vector.field(3, ti.i32, shape=(len(BLOCK_PAIRS), 2))
         self.block.from_numpy(np.array(BLOCK_PAIRS, dtype=np.int32))
         self.colours = grid.geom.colours
@@ -74,8 +78,13 @@ class Contacts:
         d = self.state.x[i] - self.state.x[j]
         for a in ti.static(range(3)):
             if ti.static(not self.f.wall_axes[a]):
+                # positions stay within about one box length of each other, so one
+                # compare-and-shift is the minimum image (no division in the hot loop)
                 size = self.params.size[None][a]
-                d[a] -= size * ti.round(d[a] / size)
+                if d[a] > 0.5 * size:
+                    d[a] -= size
+                elif d[a] < -0.5 * size:
+                    d[a] += size
         return d, self.state.v[i] - self.state.v[j], self.state.rad(i) + self.state.rad(j)
 
     @ti.func
@@ -125,14 +134,15 @@ class Contacts:
 
     # ---- detection ----
     @ti.func
-    def examine(self, i, j, ci, cj):
-        """Classify pair (i, j) in cells ci, cj: an approaching overlap is counted for
-        its owner cell; a separating overlap only updates the max overlap."""
+    def examine(self, i, j, ci):
+        """Classify pair (i, j), i in cell ci (vec3): an approaching overlap is counted
+        for its owner cell; a separating overlap only updates the max overlap."""
         d, u, sigma = self.separation(i, j)
         dd = d.norm_sqr()
         if dd < sigma * sigma:
             rel = 1 - ti.sqrt(dd) / sigma
             if self.approaching(dd, d.dot(u), u.norm_sqr()):
+                cj = self.grid.coords(self.grid.cell_of[j])
                 owner = self.grid.linear(self.grid.owner(ci, cj))
                 ti.atomic_add(self.active[owner], 1)
                 ti.atomic_add(self.params.count[REMAINING], 1)
@@ -142,7 +152,10 @@ class Contacts:
 
     @ti.kernel
     def detect_all(self):
-        """Half-stencil scan of every sphere: fills ``active`` and count[REMAINING]."""
+        """Half-stencil scan of every sphere: fills ``active`` and count[REMAINING].
+
+        Spheres are visited in cell order; the forward half of the 27-cell stencil is
+        walked as 5 rows along z (see grid.FORWARD_ROWS)."""
         self.params.reset_detection()
         ti.loop_config(serialize=ti.static(self.serial_light))
         for c in range(self.grid.m):
@@ -151,32 +164,37 @@ class Contacts:
         for i in range(self.n):
             self.state.modified[i] = 0
         ti.loop_config(serialize=ti.static(self.serial_heavy))
-        for i in range(self.n):
+        for p in range(self.n):
+            i = self.grid.order[p]
             ci = self.grid.coords(self.grid.cell_of[i])
-            for k in range(ti.static(len(FORWARD_OFFSETS))):
-                cj, ok = self.grid.shifted(ci, self.stencil[k])
-                if ok:
-                    kj = self.grid.linear(cj)
-                    for q in range(self.grid.start[kj], self.grid.start[kj + 1]):
-                        j = self.grid.order[q]
-                        if k > 0 or j > i:
-                            self.examine(i, j, ci, cj)
+            for k in range(ti.static(len(FORWARD_ROWS))):
+                a0, b0, a1, b1 = self.grid.row_ranges(ci, self.fwd_rows[k])
+                if k == 0:
+                    a0 = p + 1   # same cell: only spheres after i (ids sorted in a cell)
+                for q in range(a0, b0):
+                    self.examine(i, self.grid.order[q], ci)
+                for q in range(a1, b1):
+                    self.examine(i, self.grid.order[q], ci)
 
     @ti.func
     def detect_from_modified(self):
-        """Full-stencil scan from spheres touched in this sweep (each pair once)."""
-        ti.loop_config(serialize=ti.static(self.serial_light))
+        """Full-stencil scan (9 rows along z) from spheres touched in this sweep; a
+        pair of two touched spheres is examined once, from the lower id."""
+        ti.loop_config(serialize=ti.static(self.serial_heavy))
         for i in range(self.n):
             if self.state.modified[i]:
                 ci = self.grid.coords(self.grid.cell_of[i])
-                for k in range(ti.static(len(STENCIL))):
-                    cj, ok = self.grid.shifted(ci, self.stencil[k])
-                    if ok:
-                        kj = self.grid.linear(cj)
-                        for q in range(self.grid.start[kj], self.grid.start[kj + 1]):
-                            j = self.grid.order[q]
-                            if j != i and (self.state.modified[j] == 0 or j > i):
-                                self.examine(i, j, ci, cj)
+                for k in range(ti.static(len(ALL_ROWS))):
+                    a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
+                    for q in range(a0, b0):
+                        self.examine_if_new(i, self.grid.order[q], ci)
+                    for q in range(a1, b1):
+                        self.examine_if_new(i, self.grid.order[q], ci)
+
+    @ti.func
+    def examine_if_new(self, i, j, ci):
+        if j != i and (self.state.modified[j] == 0 or j > i):
+            self.examine(i, j, ci)
 
     # ---- resolution ----
     @ti.func
@@ -215,19 +233,25 @@ class Contacts:
                 break
             self.collide(bi, bj, best_s)
 
-    @ti.kernel
-    def resolve_colour(self, sx: ti.i32, dx: ti.i32, nx: ti.i32, sy: ti.i32, dy: ti.i32,
-                       ny: ti.i32, sz: ti.i32, dz: ti.i32, nz: ti.i32):
-        """One parallel pass over the owner cells (sx + dx*I, sy + dy*J, sz + dz*K) of
-        one colour, whose blocks are disjoint (one compiled body for all colours)."""
+    @ti.func
+    def resolve_colour(self, colour: ti.template()):
+        """One parallel pass over the owner cells of one colour, whose blocks are
+        disjoint; colour = ((start, stride, count) per axis)."""
         ti.loop_config(serialize=ti.static(self.serial_heavy))
-        for I in ti.grouped(ti.ndrange(nx, ny, nz)):
-            c = ti.Vector([sx + dx * I[0], sy + dy * I[1], sz + dz * I[2]])
+        for I in ti.grouped(ti.ndrange(colour[0][2], colour[1][2], colour[2][2])):
+            c = ti.Vector([colour[0][0] + colour[0][1] * I[0], colour[1][0] + colour[1][1] * I[1],
+                           colour[2][0] + colour[2][1] * I[2]])
             k = self.grid.linear(c)
             budget = self.active[k]
             if budget > 0:
                 self.resolve_block(c, ti.min(budget, MAX_BLOCK_COLLISIONS))
                 self.active[k] = 0
+
+    @ti.kernel
+    def resolve_colours(self):
+        """Every colour in turn, each a parallel loop (one launch for all)."""
+        for k in ti.static(range(len(self.colours))):
+            self.resolve_colour(self.colours[k])
 
     @ti.kernel
     def after_sweep(self):
@@ -245,8 +269,7 @@ class Contacts:
 
     def sweep(self):
         """Resolve every colour in turn, then :meth:`after_sweep`."""
-        for colour in self.colours:
-            self.resolve_colour(*colour[0], *colour[1], *colour[2])
+        self.resolve_colours()
         self.after_sweep()
 
     # ---- debugging / tests ----

@@ -22,7 +22,8 @@ import taichi as ti
 
 from .state import SphereState
 
-__all__ = ["GridGeometry", "Grid", "BLOCK_PAIRS", "FORWARD_OFFSETS", "SCAN_BLOCK"]
+__all__ = ["GridGeometry", "Grid", "BLOCK_PAIRS", "FORWARD_OFFSETS", "FORWARD_ROWS", "ALL_ROWS",
+           "SCAN_BLOCK"]
 
 SCAN_BLOCK = 1024
 
@@ -54,6 +55,11 @@ BLOCK_PAIRS = _block_pairs()
 FORWARD_OFFSETS = ((0, 0, 0),) + tuple(
     o for o in itertools.product((-1, 0, 1), repeat=3) if o > (0, 0, 0))
 ALL_OFFSETS = tuple(itertools.product((-1, 0, 1), repeat=3))
+#: The same stencils as rows along z, (dx, dy, dz_lo, dz_hi): the cells of one row are
+#: contiguous in the sorted order, so a row is one range of sphere ids (two if it
+#: wraps around a periodic z axis) instead of up to three cell look-ups.
+FORWARD_ROWS = ((0, 0, 0, 1), (0, 1, -1, 1), (1, -1, -1, 1), (1, 0, -1, 1), (1, 1, -1, 1))
+ALL_ROWS = tuple((dx, dy, -1, 1) for dx in (-1, 0, 1) for dy in (-1, 0, 1))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,6 +98,8 @@ class GridGeometry:
                 k -= 1   # even count: 2 colours on this axis instead of 3
             dims.append(k)
             cell.append(length / k)
+        # the margin actually available once cells are rounded up to fit the box
+        slack = max(slack, 0.5 * (min(cell) - 2.0 * r_max))
         return cls(lo=tuple(float(v) for v in lo), cell=tuple(cell), dims=tuple(dims),
                    periodic=tuple(bool(p) for p in periodic), slack=slack)
 
@@ -187,6 +195,37 @@ class Grid:
                 if out[a] < 0 or out[a] >= n:
                     valid = False
         return out, valid
+
+    @ti.func
+    def row_ranges(self, c, row):
+        """Ranges [a0, b0) and [a1, b1) of ``order`` holding the cells
+        (c.x + row.x, c.y + row.y, c.z + row.z .. c.z + row.w); empty when off the grid."""
+        a0 = 0
+        b0 = 0
+        a1 = 0
+        b1 = 0
+        xy, ok = self.shifted(c, ti.Vector([row[0], row[1], 0]))
+        if ok:
+            nz = ti.static(self.geom.dims[2])
+            base = (xy[0] * ti.static(self.geom.dims[1]) + xy[1]) * nz
+            z0 = c[2] + row[2]
+            z1 = c[2] + row[3]
+            if ti.static(self.geom.periodic[2]):
+                if z0 < 0:
+                    a1 = self.start[base + nz - 1]
+                    b1 = self.start[base + nz]
+                    z0 = 0
+                if z1 >= nz:
+                    a1 = self.start[base]
+                    b1 = self.start[base + 1]
+                    z1 = nz - 1
+            else:
+                z0 = ti.max(z0, 0)
+                z1 = ti.min(z1, nz - 1)
+            if z0 <= z1:
+                a0 = self.start[base + z0]
+                b0 = self.start[base + z1 + 1]
+        return a0, b0, a1, b1
 
     @ti.func
     def owner(self, ca, cb):

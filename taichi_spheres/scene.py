@@ -17,7 +17,8 @@ __all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE"]
 #: kg/m^3, used when neither ``mass`` nor ``density`` is given (water).
 DEFAULT_DENSITY = 1000.0
 #: Relative overlap allowed at set-up so that spheres given as exactly touching
-#: (distance == r_i + r_j up to decimal round-off) are accepted.
+#: (distance == r_i + r_j, or centre +- radius == wall, up to decimal round-off)
+#: are accepted.
 TOUCH_TOLERANCE = 1e-10
 
 
@@ -90,8 +91,13 @@ class Scene:
         else:
             dens = _per_sphere("density", DEFAULT_DENSITY if density is None else density, n)
             _positive("density", dens)
-            mass = dens * (4.0 / 3.0) * math.pi * radius ** 3
+            with np.errstate(over="ignore", under="ignore"):
+                mass = dens * (4.0 / 3.0) * math.pi * radius ** 3
             _positive("mass (from density)", mass)
+            bad = np.flatnonzero(~np.isfinite(mass))
+            if bad.size:
+                raise ValueError(f"mass (from density) of sphere {bad[0]} is not finite "
+                                 f"(density {dens[bad[0]]}, radius {radius[bad[0]]})" + _more(bad))
         try:
             lo, hi = box
         except (TypeError, ValueError):
@@ -102,6 +108,9 @@ class Scene:
             if not hi[a] > lo[a]:
                 raise ValueError(f"box: upper corner must exceed lower corner on axis {'xyz'[a]} "
                                  f"({lo[a]} .. {hi[a]})")
+        with np.errstate(over="ignore"):
+            if not np.isfinite(hi - lo).all():
+                raise ValueError(f"box: size {(hi - lo).tolist()} is not finite")
         periodic = _periodic(periodic)
         gravity = _vector3("gravity", gravity)
         restitution = _restitution("restitution", restitution)
@@ -205,7 +214,11 @@ def _inside_box(x, radius, lo, hi, periodic):
             bad = np.flatnonzero((x[:, a] < lo[a]) | (x[:, a] >= hi[a]))
             where = f"[{lo[a]}, {hi[a]}) on periodic axis {'xyz'[a]}"
         else:
-            bad = np.flatnonzero((x[:, a] - radius < lo[a]) | (x[:, a] + radius > hi[a]))
+            # a sphere given as touching a wall (centre +- radius == wall up to decimal
+            # round-off, e.g. 0.2 + 0.1 > 0.3) is accepted, like touching pairs
+            slack = radius * TOUCH_TOLERANCE
+            bad = np.flatnonzero((x[:, a] - radius < lo[a] - slack)
+                                 | (x[:, a] + radius > hi[a] + slack))
             where = f"the walls {lo[a]} .. {hi[a]} on axis {'xyz'[a]} (centre +- radius)"
         if bad.size:
             i = bad[0]

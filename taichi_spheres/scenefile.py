@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import re
 try:
     import tomllib
 except ImportError:  # Python 3.10
@@ -61,6 +62,11 @@ def load_scene(path) -> Scene:
             data = tomllib.load(fh)
     except FileNotFoundError:
         raise ValueError(f"scene file not found: {path}") from None
+    except OSError as exc:  # a directory, no permission, ...
+        raise ValueError(f"cannot read scene file {path}: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise SceneFileError(path, [f"not valid TOML: not UTF-8 text ({exc.reason} at byte "
+                                    f"{exc.start})"]) from None
     except tomllib.TOMLDecodeError as exc:
         raise SceneFileError(path, [f"not valid TOML: {exc}"]) from None
     return scene_from_dict(data, source=path)
@@ -83,18 +89,21 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
                 problems.append(f"{where}: must be a table ([[{key}]])")
                 continue
             _check_table(item, schema, where + ".", problems)
+            _check_group(key, where, item, schema, problems)
             groups.append((key, where, item))
     lo = box.get("lo", [0.0, 0.0, 0.0])
     hi = box.get("hi", [1.0, 1.0, 1.0])
     if "precision" in physics and physics["precision"] not in ("f32", "f64"):
         problems.append(f"physics.precision: must be \"f32\" or \"f64\", got {physics['precision']!r}")
+    _check_values(box, physics, problems)
     if not groups and not problems:
         problems.append("no spheres: add [[spheres]], [[lattice]] or [[random]] tables")
     arrays = {"x": [], "v": [], "radius": [], "mass": []}
     if not problems:
         for kind, where, item in groups:
             try:
-                _generate(kind, where, item, lo, hi, arrays, problems)
+                _generate(kind, where, item, lo, hi, arrays, problems,
+                          periodic=box.get("periodic", False))
             except ValueError as exc:
                 problems.append(f"{where}: {exc}")
     if problems:
@@ -109,7 +118,7 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
             wall_restitution=box.get("wall_restitution", 1.0),
             name=data.get("name", "scene"))
     except ValueError as exc:
-        raise SceneFileError(source, [str(exc)]) from None
+        raise SceneFileError(source, [str(exc) + _origins(str(exc), groups, arrays)]) from None
     meta = {"run": run, "physics": physics, "source": source}
     return dataclasses.replace(scene, meta=meta)
 
@@ -126,13 +135,105 @@ def _check_table(table, schema, prefix, problems):
     for key, value in table.items():
         if key not in schema:
             near = difflib.get_close_matches(key, list(schema), n=1)
-            hint = f" (did you mean '{prefix}{near[0]}'?)" if near else \
-                f" (valid: {', '.join(sorted(schema))})"
+            if near:
+                hint = f" (did you mean '{prefix}{near[0]}'?)"
+            elif schema is _TOP and (nested := _nested_match(key)):
+                # e.g. `periodic = true` written above the first [table]
+                hint = (f" (did you mean '{nested}'? put it under "
+                        f"[{nested.split('.')[0]}])")
+            else:
+                hint = f" (valid: {', '.join(sorted(schema))})"
             problems.append(f"unknown key '{prefix}{key}'{hint}")
             continue
         msg = _type_problem(value, schema[key])
         if msg:
             problems.append(f"{prefix}{key}: {msg}")
+
+
+def _nested_match(key):
+    """'box.periodic' for a top-level key that belongs in [box], [physics] or [run]."""
+    names = {k: f"{table}.{k}" for table, schema in
+             (("box", _BOX), ("physics", _PHYSICS), ("run", _RUN)) for k in schema}
+    near = difflib.get_close_matches(key, list(names), n=1)
+    return names[near[0]] if near else None
+
+
+_REQUIRED = {"spheres": ("x", "radius"), "lattice": ("radius",), "random": ("count", "radius")}
+
+
+def _valid(table, key, schema):
+    """The value of key when present and of the right type, else None."""
+    if key in table and _type_problem(table[key], schema[key]) is None:
+        return table[key]
+    return None
+
+
+def _check_group(kind, where, item, schema, problems):
+    """Problems in one [[spheres]]/[[lattice]]/[[random]] table that need no geometry."""
+    missing = [k for k in _REQUIRED[kind] if k not in item]
+    if missing:
+        problems.append(f"{where}: missing " + ", ".join(f"'{k}'" for k in missing))
+    for a, b in (("mass", "density"), ("v", "speed")):
+        if a in item and b in item:
+            problems.append(f"{where}: give {a} or {b}, not both")
+    for key in ("radius", "mass", "density", "spacing"):
+        value = _valid(item, key, schema) if key in schema else None
+        if value is not None and not value > 0:
+            problems.append(f"{where}.{key}: must be > 0, got {value!r}")
+    for key, least in (("speed", 0), ("seed", 0), ("count", 1)):
+        value = _valid(item, key, schema) if key in schema else None
+        if value is not None and not value >= least:
+            problems.append(f"{where}.{key}: must be >= {least}, got {value!r}")
+    lo, hi = _valid(item, "lo", schema), _valid(item, "hi", schema)
+    if kind != "spheres" and lo is not None and hi is not None:
+        for a in range(3):
+            if not hi[a] > lo[a]:
+                problems.append(f"{where}: hi must exceed lo on axis {'xyz'[a]} "
+                                f"({lo[a]} .. {hi[a]})")
+
+
+def _check_values(box, physics, problems):
+    """Range problems in [box] and [physics] (types were checked already)."""
+    lo, hi = _valid(box, "lo", _BOX), _valid(box, "hi", _BOX)
+    for a in range(3):
+        la = 0.0 if lo is None else lo[a]
+        ha = 1.0 if hi is None else hi[a]
+        if (lo is not None or hi is not None) and not ha > la:
+            problems.append(f"box: hi must exceed lo on axis {'xyz'[a]} ({la} .. {ha})")
+    for table, name, key in ((box, "box", "wall_restitution"), (physics, "physics", "restitution")):
+        value = _valid(table, key, _BOX if name == "box" else _PHYSICS)
+        if value is not None and not 0 <= value <= 1:
+            problems.append(f"{name}.{key}: must be in [0, 1], got {value!r}")
+    value = _valid(physics, "step_fraction", _PHYSICS)
+    if value is not None and not 0 < value <= 1:
+        problems.append(f"physics.step_fraction: must be in (0, 1], got {value!r}")
+    value = _valid(physics, "max_sweeps", _PHYSICS)
+    if value is not None and value < 1:
+        problems.append(f"physics.max_sweeps: must be >= 1, got {value!r}")
+
+
+def _origins(message, groups, arrays):
+    """' (sphere 7 is lattice[0] #3)': where the sphere numbers in a Scene error come from."""
+    starts, names, total = [], [], 0
+    for (kind, where, _), x in zip(groups, arrays["x"]):
+        starts.append(total)
+        names.append((kind, where))
+        total += len(x)
+    if len(groups) < 2:
+        return ""
+    found = []
+    for m in re.finditer(r"\bspheres? (\d+)(?: and (\d+))?", message):
+        for g in m.groups():
+            if g is not None and int(g) < total and g not in found:
+                found.append(g)
+    notes = []
+    for g in found:
+        k = int(g)
+        idx = int(np.searchsorted(starts, k, side="right")) - 1
+        kind, where = names[idx]
+        notes.append(f"sphere {k} is {where}" if kind == "spheres"
+                     else f"sphere {k} is {where} #{k - starts[idx]}")
+    return f" ({'; '.join(notes)})" if notes else ""
 
 
 def _type_problem(value, kind):
@@ -186,7 +287,7 @@ def _need(item, keys, where):
         raise ValueError("missing " + ", ".join(f"'{k}'" for k in missing))
 
 
-def _generate(kind, where, item, box_lo, box_hi, arrays, problems):
+def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=False):
     rng = np.random.default_rng(item.get("seed", 0))
     if kind == "spheres":
         _need(item, ("x", "radius"), where)
@@ -200,7 +301,10 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems):
         spacing = float(item.get("spacing", 2.2 * r))
         if spacing < 2 * r:
             raise ValueError(f"spacing {spacing} is less than the diameter {2 * r}")
-        axes = [np.arange(lo[a] + r, hi[a] - r + 1e-12 * spacing, spacing) for a in range(3)]
+        # lo + r + k spacing can round past hi - r (0.1 + 4 * 0.2 = 0.9000000000000001):
+        # keep such a last layer, on the wall, as the intended touching layer
+        axes = [np.minimum(np.arange(lo[a] + r, hi[a] - r + 1e-12 * spacing, spacing), hi[a] - r)
+                for a in range(3)]
         if any(len(ax) == 0 for ax in axes):
             raise ValueError("region too small for one sphere")
         x = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
@@ -213,7 +317,8 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems):
         lo = np.asarray(item.get("lo", box_lo), dtype=np.float64)
         hi = np.asarray(item.get("hi", box_hi), dtype=np.float64)
         x = random_positions(count, float(item["radius"]), lo, hi, rng,
-                             existing=(arrays["x"], arrays["radius"]))
+                             existing=(arrays["x"], arrays["radius"]),
+                             box=(box_lo, box_hi), periodic=periodic)
     radius = np.full(count, float(item["radius"]))
     arrays["x"].append(x)
     arrays["v"].append(_velocities(item, count, rng))
@@ -221,9 +326,21 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems):
     arrays["mass"].append(_mass_of(item, radius, where, count))
 
 
-def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=200):
+def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=200,
+                     box=None, periodic=False):
     """count non-overlapping centres of spheres of one radius inside [lo, hi]
-    (random sequential addition on a hash grid; raises if the region is too full)."""
+    (random sequential addition on a hash grid; raises if the region is too full).
+
+    box: (lo, hi) of the simulation box and periodic: bool or 3 bools; on periodic
+    axes spheres near one face are also kept clear of the images of spheres near the
+    opposite face (minimum image), as :class:`Scene` checks."""
+    periodic = (bool(periodic),) * 3 if isinstance(periodic, bool) else \
+        tuple(bool(p) for p in periodic)
+    if box is None:
+        periodic = (False, False, False)
+    else:
+        box_lo = np.asarray(box[0], dtype=np.float64)
+        box_hi = np.asarray(box[1], dtype=np.float64)
     lo = lo + radius
     hi = hi - radius
     if np.any(hi < lo):
@@ -236,8 +353,28 @@ def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=20
     def key(p):
         return tuple(np.floor(p / cell).astype(np.int64))
 
+    def images(p):
+        """p and, on periodic axes, its copies one box length away when p lies within
+        one cell of a face (only those can come within reach of a sphere inside)."""
+        shifts = [(0.0,)] * 3
+        for a in range(3):
+            if periodic[a]:
+                size = box_hi[a] - box_lo[a]
+                s = [0.0]
+                if p[a] - box_lo[a] < cell:
+                    s.append(size)
+                if box_hi[a] - p[a] < cell:
+                    s.append(-size)
+                shifts[a] = tuple(s)
+        return [p + np.array((sx, sy, sz)) for sx in shifts[0] for sy in shifts[1]
+                for sz in shifts[2]]
+
+    def add(p, r):
+        for q in images(p):
+            buckets.setdefault(key(q), []).append((q, r))
+
     for p, r in zip(prev_x, prev_r):
-        buckets.setdefault(key(p), []).append((p, r))
+        add(p, r)
     out = np.empty((count, 3))
     for k in range(count):
         for _ in range(max_tries):
@@ -259,7 +396,7 @@ def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=20
                     break
             if ok:
                 out[k] = p
-                buckets.setdefault(c, []).append((p, radius))
+                add(p, radius)
                 break
         else:
             raise ValueError(f"could not place sphere {k} of {count} without overlap after "

@@ -9,12 +9,13 @@ velocity and ``g`` the acceleration along the inward normal, the time since
 contact ``s`` is the smallest root of ``g/2 s^2 - w s + d = 0`` at which the
 sphere was moving into the wall (``w - g s < 0``). The normal velocity at contact
 is reversed and scaled by the wall restitution, and the sphere is carried forward
-by ``s`` on its new path. A sphere that re-crosses within the same step (small e
-under gravity) bounces again, up to ``MAX_WALL_BOUNCES`` times; if it is still
-past the wall then, or its penetration is not explained by a crossing on its
-ballistic path (pushed there by a pair collision), it is put on the wall and its
-velocity into the wall is zeroed — a "wall rest" that never adds kinetic energy
-and is counted in ``stats['wall_rests']``.
+by ``s`` on its new path. A sphere whose penetration is not explained by a
+crossing on its current ballistic path (a pair collision carried it there) is
+mirrored back into the box and its inward velocity reflected at once. A sphere
+that re-crosses within the same step (small e under gravity) bounces again, up to
+``MAX_WALL_BOUNCES`` times; if it is still past the wall then, it is put on the
+wall and its velocity into the wall is zeroed — a "wall rest" that never adds
+kinetic energy, counted in ``stats['wall_rests']``.
 """
 
 import taichi as ti
@@ -120,8 +121,23 @@ class Motion:
                             moved += (wn - wc) * s
                             ti.atomic_add(self.params.count[WALLS], 1)
                             bounced = True
+                        if not bounced and bounce < MAX_WALL_BOUNCES:
+                            # past the wall without a crossing on its current path (a
+                            # pair collision carried it there): reflect it now, mirroring
+                            # the position into the box
+                            wn = w
+                            if w < 0:
+                                wn = -e_w * w
+                            if side < 0:
+                                x[a] = lo_c - d
+                            else:
+                                x[a] = hi_c + d
+                            v[a] = wn * side * -1
+                            moved += -2 * d
+                            ti.atomic_add(self.params.count[WALLS], 1)
+                            bounced = True
                         if not bounced:
-                            # not a ballistic crossing, or bounced out: rest on the wall
+                            # still past the wall after MAX_WALL_BOUNCES: rest on it
                             if side < 0:
                                 x[a] = lo_c
                                 v[a] = ti.max(v[a], 0)

@@ -1,0 +1,45 @@
+"""Ready-made scenes for tests, benchmarks and examples (numpy only, reproducible)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .scene import Scene
+
+__all__ = ["gas"]
+
+
+def gas(n, packing=0.3, radius=0.5, periodic=True, gravity=(0.0, 0.0, 0.0), restitution=1.0,
+        wall_restitution=1.0, speed=1.0, seed=0, polydispersity=0.0, mass=None):
+    """n spheres on a jittered simple-cubic lattice in a cube at packing fraction
+    ``packing`` (by mean volume), Gaussian velocities with rms component ``speed``
+    [m/s] and zero total momentum. polydispersity: radii uniform in
+    radius * [1 - p, 1]; mass None means density 1000 kg/m^3."""
+    rng = np.random.default_rng(seed)
+    radii = radius * (1.0 - polydispersity * rng.random(n)) if polydispersity else \
+        np.full(n, float(radius))
+    box = (np.sum(4.0 / 3.0 * math.pi * radii ** 3) / packing) ** (1.0 / 3.0)
+    rmax = float(radii.max())
+    side = int(math.floor(box / (2.0 * rmax)))
+    if side ** 3 < n:
+        raise ValueError(f"packing {packing} too dense for a simple-cubic start of {n} spheres "
+                         f"(room for {side ** 3})")
+    side = max(int(math.ceil(n ** (1.0 / 3.0) - 1e-9)), 1)
+    while side ** 3 < n:
+        side += 1
+    spacing = box / side
+    if spacing < 2.0 * rmax:     # rounding up n^(1/3) left too little room: use all sites
+        side = int(math.floor(box / (2.0 * rmax)))
+        spacing = box / side
+    sites = (np.stack(np.meshgrid(*(np.arange(side),) * 3, indexing="ij"), -1)
+             .reshape(-1, 3)[:n] + 0.5) * spacing
+    jitter = 0.5 * (spacing - 2.0 * radii)[:, None] * (rng.random((n, 3)) * 2.0 - 1.0)
+    x = sites + jitter
+    v = rng.normal(scale=speed, size=(n, 3))
+    if n > 1:
+        v -= v.mean(axis=0)
+    return Scene.from_arrays(x, v, radii, mass=mass, box=((0.0,) * 3, (box,) * 3),
+                             periodic=(periodic,) * 3 if isinstance(periodic, bool) else periodic,
+                             gravity=gravity, restitution=restitution,
+                             wall_restitution=wall_restitution, name=f"gas{n}")

@@ -1,0 +1,149 @@
+"""Many-body invariants: elastic gases conserve energy and momentum, runs are
+bit-for-bit reproducible, steps land on requested times, features compile out."""
+import numpy as np
+import pytest
+
+import taichi_spheres as ts
+from taichi_spheres.builders import gas
+from conftest import tol
+
+
+def _invariants(st, gravity=(0, 0, 0)):
+    return ts.observe.total_energy(st, gravity), ts.observe.momentum(st)
+
+
+@pytest.mark.parametrize("periodic", [True, False])
+def test_elastic_gas_conserves_energy_and_momentum(arch, precision, periodic):
+    scene = gas(1000, packing=0.3, periodic=periodic, seed=1)
+    sim = ts.Simulation(scene, arch=arch, precision=precision)
+    st0 = sim.state()
+    e0, p0 = _invariants(st0)
+    sim.advance(4.0)
+    st = sim.state()
+    e1, p1 = _invariants(st)
+    stats = sim.stats
+    assert stats["pair_collisions"] > 10 * scene.n, "needs many collisions per sphere"
+    assert stats["unresolved"] == 0
+    # energy: each collision conserves |v|^2 to round-off; errors add up like a random walk
+    rel = abs(e1 / e0 - 1)
+    assert rel < tol(precision, 2e4 if precision == "f64" else 2e2), rel
+    if precision == "f64":
+        assert rel < 1e-12
+    if periodic:
+        p_scale = np.sqrt(2 * e0 * scene.mass.sum())     # sum m |v| scale
+        assert np.all(np.abs(p1 - p0) < tol(precision, 1e3) * p_scale), p1 - p0
+    else:
+        assert stats["wall_collisions"] > 0
+    # nothing left overlapping more than the out-of-order error of a step
+    assert stats["max_overlap"] < 0.05
+    # every sphere inside the box
+    lo, hi = scene.box_lo, scene.box_hi
+    if not periodic:
+        slack = tol(precision, 1e3) * (hi - lo)
+        assert np.all(st.x - st.radius[:, None] >= lo - slack)
+        assert np.all(st.x + st.radius[:, None] <= hi + slack)
+
+
+def test_unequal_masses_and_radii_conserve_energy(arch):
+    scene = gas(500, packing=0.12, periodic=True, seed=4, polydispersity=0.5)
+    rng = np.random.default_rng(0)
+    mass = scene.mass * rng.uniform(0.1, 10.0, scene.n)
+    scene = scene.replace(mass=mass)
+    sim = ts.Simulation(scene, arch=arch)
+    assert not sim.features.equal_masses and not sim.features.equal_radii
+    e0, p0 = _invariants(sim.state())
+    sim.advance(3.0)
+    e1, p1 = _invariants(sim.state())
+    assert sim.stats["pair_collisions"] > 5 * scene.n
+    assert abs(e1 / e0 - 1) < 1e-12
+    assert np.all(np.abs(p1 - p0) < 1e-12 * np.sqrt(2 * e0 * mass.sum()))
+
+
+def test_same_scene_gives_identical_bits(arch):
+    scene = gas(1500, packing=0.35, periodic=(True, False, True), seed=7, restitution=0.9,
+                gravity=(0, 0, -2.0), wall_restitution=0.8)
+    runs = []
+    for _ in range(2):
+        sim = ts.Simulation(scene, arch=arch)
+        sim.advance(0.4)
+        st = sim.state()
+        runs.append((st.x, st.v, sim.stats))
+    assert runs[0][2]["pair_collisions"] > 500
+    assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
+    assert runs[0][2] == runs[1][2]
+
+
+def test_bits_do_not_depend_on_thread_count(arch):
+    if arch != "cpu":
+        pytest.skip("thread count is a CPU setting")
+    scene = gas(4000, packing=0.3, periodic=True, seed=2)   # large enough for parallel loops
+    out = []
+    for threads in (1, 2):
+        sim = ts.Simulation(scene, arch=arch, threads=threads)
+        sim.advance(0.3)
+        out.append(sim.state())
+    assert np.array_equal(out[0].x, out[1].x) and np.array_equal(out[0].v, out[1].v)
+
+
+def test_steps_land_exactly_on_requested_times(arch):
+    sim = ts.Simulation(gas(200, periodic=True), arch=arch)
+    for k in range(1, 6):
+        sim.advance_to(k / 30.0)
+        assert sim.time == k / 30.0
+    sim.advance(0.0)
+    assert sim.time == 5 / 30.0
+    steps = sim.stats["steps"]
+    assert steps > 5
+    with pytest.raises(ValueError):
+        sim.advance(-1.0)
+    with pytest.raises(ValueError):
+        sim.advance(float("nan"))
+
+
+def test_adaptive_step_bounds_displacement(arch):
+    """No sphere moves more than step_fraction * r_min in one free-flight step."""
+    scene = gas(300, packing=0.1, periodic=False, seed=5, gravity=(0, 0, -9.81),
+                polydispersity=0.5)
+    sim = ts.Simulation(scene, arch=arch, step_fraction=0.05)
+    for _ in range(20):
+        before = sim.state()
+        h = sim.max_step()
+        v, g = before.v, scene.gravity
+        disp = np.linalg.norm(v * h + 0.5 * g * h * h, axis=1)
+        assert disp.max() <= 0.05 * scene.radius.min() * (1 + 1e-12)
+        sim.step(h)
+
+
+def test_features_compiled_in_only_when_needed(arch):
+    plain = ts.Simulation(gas(100, periodic=True), arch=arch).features
+    assert not plain.gravity and not plain.walls and plain.equal_radii and plain.equal_masses
+    assert plain.elastic and plain.elastic_walls
+    rich = ts.Simulation(gas(100, packing=0.1, periodic=False, gravity=(0, 0, -1), restitution=0.5,
+                             wall_restitution=0.7, polydispersity=0.3), arch=arch)
+    f = rich.features
+    assert f.gravity_axes == (False, False, True) and f.wall_axes == (True, True, True)
+    assert not f.equal_radii and not f.equal_masses and not f.elastic and not f.elastic_walls
+    assert rich._state.radius is not None and rich._state.inv_mass is not None
+    assert ts.Simulation(gas(100), arch=arch)._state.radius is None
+
+
+def test_stale_simulation_refuses_to_run(arch):
+    sim = ts.Simulation(gas(50, periodic=True), arch=arch, precision="f64")
+    ts.Simulation(gas(50, periodic=True), arch=arch, precision="f32")   # re-initialises
+    with pytest.raises(RuntimeError, match="re-initialised"):
+        sim.advance(0.1)
+
+
+def test_bad_simulation_arguments(arch):
+    scene = gas(10, packing=0.05, periodic=True)
+    with pytest.raises(ValueError, match="arch"):
+        ts.Simulation(scene, arch="tpu")
+    with pytest.raises(ValueError, match="precision"):
+        ts.Simulation(scene, arch=arch, precision="f16")
+    with pytest.raises(ValueError, match="step_fraction"):
+        ts.Simulation(scene, arch=arch, step_fraction=0)
+    with pytest.raises(ValueError, match="max_sweeps"):
+        ts.Simulation(scene, arch=arch, max_sweeps=0)
+    tiny = ts.Scene.from_arrays([[0.5, 0.5, 0.5]], [[0, 0, 0]], 0.2, periodic=True)
+    with pytest.raises(ValueError, match="periodic axis x"):
+        ts.Simulation(tiny, arch=arch)

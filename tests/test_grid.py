@@ -1,0 +1,143 @@
+"""Grid, ownership and colours: the parallel path finds what brute force finds, and no
+sphere can be touched by two threads of one colour."""
+import itertools
+
+import numpy as np
+import pytest
+
+import taichi_spheres as ts
+from taichi_spheres.builders import gas
+from taichi_spheres.grid import BLOCK_PAIRS, GridGeometry
+
+
+def brute_force_overlaps(st, box_lo, box_hi, periodic, eps):
+    """All pairs (i < j) with |d| < r_i + r_j and d.u < -eps |d||u| (minimum image)."""
+    x, v, r = st.x, st.v, st.radius
+    size = box_hi - box_lo
+    d = x[:, None, :] - x[None, :, :]
+    for a in range(3):
+        if periodic[a]:
+            d[..., a] -= size[a] * np.round(d[..., a] / size[a])
+    u = v[:, None, :] - v[None, :, :]
+    dd = (d * d).sum(-1)
+    du = (d * u).sum(-1)
+    uu = (u * u).sum(-1)
+    sig = r[:, None] + r[None, :]
+    hit = (dd < sig * sig) & (du < -eps * np.sqrt(dd * uu))
+    i, j = np.nonzero(np.triu(hit, 1))
+    return np.stack([i, j], 1)
+
+
+def _overlapping_scene(n, periodic, seed, poly=0.0):
+    """A gas whose spheres are then pushed towards each other so many pairs overlap."""
+    base = gas(n, packing=0.1 if poly else 0.25, periodic=periodic, seed=seed, polydispersity=poly,
+               gravity=(0, 0, 0))
+    return base
+
+
+@pytest.mark.parametrize("periodic,poly", [(True, 0.0), (False, 0.0), ((True, False, True), 0.6)])
+def test_grid_detection_matches_brute_force(arch, periodic, poly):
+    scene = _overlapping_scene(400, periodic, seed=3, poly=poly)
+    sim = ts.Simulation(scene, arch=arch)
+    # a long free flight creates many overlaps without resolving them
+    h = (60 if poly else 20) * sim.max_step()
+    sim._params.h[None] = h
+    sim._motion.drift()
+    pairs = sim.grid_overlaps()
+    st = sim.state()
+    ref = brute_force_overlaps(st, scene.box_lo, scene.box_hi, scene.periodic,
+                               sim._contacts.approach_eps)
+    assert len(ref) > 20, "the set-up must produce overlaps to compare"
+    np.testing.assert_array_equal(pairs, ref)
+
+
+@pytest.mark.parametrize("dims,periodic", [
+    ((4, 4, 4), (True, True, True)),
+    ((5, 3, 7), (True, True, True)),      # odd periodic counts: a third colour
+    ((5, 2, 1), (False, False, False)),
+    ((6, 3, 4), (False, True, False)),
+])
+def test_colours_partition_adjacent_cell_pairs(dims, periodic):
+    """Every pair of equal-or-adjacent cells is owned by exactly one (owner, block pair),
+    and owner cells of one colour have disjoint 2x2x2 blocks."""
+    geom = GridGeometry(lo=(0, 0, 0), cell=(1, 1, 1), dims=dims, periodic=periodic, slack=0)
+
+    def wrap(c):
+        out = []
+        for a in range(3):
+            k = c[a]
+            if periodic[a]:
+                k %= dims[a]
+            elif not 0 <= k < dims[a]:
+                return None
+            out.append(k)
+        return tuple(out)
+
+    cells = list(itertools.product(*(range(n) for n in dims)))
+    owned = {}
+    for c in cells:
+        for a_off, b_off in BLOCK_PAIRS:
+            a = wrap(tuple(ci + o for ci, o in zip(c, a_off)))
+            b = wrap(tuple(ci + o for ci, o in zip(c, b_off)))
+            if a is None or b is None:
+                continue
+            key = frozenset((a, b))
+            owned.setdefault(key, []).append(c)
+    adjacent = set()
+    for c in cells:
+        for off in itertools.product((-1, 0, 1), repeat=3):
+            d = wrap(tuple(ci + o for ci, o in zip(c, off)))
+            if d is not None:
+                adjacent.add(frozenset((c, d)))
+    assert set(owned) == adjacent
+    assert all(len(v) == 1 for v in owned.values())
+    # colours: each cell has exactly one; blocks of one colour are disjoint
+    seen = []
+    for colour in geom.colours:
+        members = geom.colour_cells(colour)
+        seen += members
+        touched = set()
+        for c in members:
+            block = {wrap(tuple(ci + o for ci, o in zip(c, off)))
+                     for off in itertools.product((0, 1), repeat=3)} - {None}
+            assert not (block & touched), f"colour {colour}: cell {c} shares a block cell"
+            touched |= block
+    assert sorted(seen) == sorted(cells)
+
+
+@pytest.mark.parametrize("periodic", [True, False])
+def test_compiled_colour_loops_touch_each_sphere_once(arch, periodic):
+    """On the compiled kernels: for every colour, each sphere lies in the block of at
+    most one owner cell of that colour, and every sphere is in some block."""
+    sim = ts.Simulation(gas(600, packing=0.3, periodic=periodic, gravity=(0, 0, 0)), arch=arch)
+    sim._grid.build()
+    total = np.zeros(sim.n, dtype=np.int64)
+    for k in range(len(sim._contacts.colours)):
+        touches = sim._contacts.block_touches(k)
+        assert touches.max() <= 1, f"colour {k}: a sphere is in two blocks"
+        total += touches
+    assert total.min() >= 1
+
+
+def test_grid_order_is_sorted_and_complete(arch):
+    sim = ts.Simulation(gas(500, periodic=False, gravity=(0, 0, 0)), arch=arch)
+    sim._grid.build()
+    start = sim._grid.start.to_numpy()
+    order = sim._grid.order.to_numpy()
+    cell_of = sim._grid.cell_of.to_numpy()
+    assert sorted(order.tolist()) == list(range(sim.n))
+    for c in range(sim._grid.m):
+        ids = order[start[c]:start[c + 1]]
+        assert np.all(np.diff(ids) > 0), "ids inside a cell must be sorted"
+        assert np.all(cell_of[ids] == c)
+
+
+def test_scan_over_many_blocks(arch):
+    """More cells than one scan block: the multi-level scan still gives exact starts."""
+    scene = gas(3000, packing=0.05, periodic=True, gravity=(0, 0, 0))
+    sim = ts.Simulation(scene, arch=arch)
+    assert sim._grid.m > 1024 and len(sim._grid.scan_sizes) >= 2
+    sim._grid.build()
+    start = sim._grid.start.to_numpy()
+    counts = np.bincount(sim._grid.cell_of.to_numpy(), minlength=sim._grid.m)
+    np.testing.assert_array_equal(start, np.concatenate([[0], np.cumsum(counts)]))
