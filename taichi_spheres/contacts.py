@@ -73,8 +73,8 @@ class Contacts:
     # ---- pair geometry and physics ----
     @ti.func
     def separation(self, i, j):
-        """d = x_i - x_j (minimum image on periodic axes) [m], u = v_i - v_j [m/s],
-        sigma = r_i + r_j [m]."""
+        """d = x_i - x_j (minimum image on periodic axes) [m] and sigma = r_i + r_j [m].
+        Velocities are loaded separately, only for overlapping pairs."""
         d = self.state.x[i] - self.state.x[j]
         for a in ti.static(range(3)):
             if ti.static(not self.f.wall_axes[a]):
@@ -85,7 +85,12 @@ class Contacts:
                     d[a] -= size
                 elif d[a] < -0.5 * size:
                     d[a] += size
-        return d, self.state.v[i] - self.state.v[j], self.state.rad(i) + self.state.rad(j)
+        return d, self.state.rad(i) + self.state.rad(j)
+
+    @ti.func
+    def rel_velocity(self, i, j):
+        """u = v_i - v_j [m/s]."""
+        return self.state.v[i] - self.state.v[j]
 
     @ti.func
     def approaching(self, dd, du, uu):
@@ -103,7 +108,8 @@ class Contacts:
     @ti.func
     def collide(self, i, j, s):
         """Rewind i, j by s to contact, apply the restitution impulse, carry forward."""
-        d, u, sigma = self.separation(i, j)
+        d, sigma = self.separation(i, j)
+        u = self.rel_velocity(i, j)
         n = (d - u * s).normalized()
         un = u.dot(n)
         if un < 0:
@@ -137,9 +143,10 @@ class Contacts:
     def examine(self, i, j, ci):
         """Classify pair (i, j), i in cell ci (vec3): an approaching overlap is counted
         for its owner cell; a separating overlap only updates the max overlap."""
-        d, u, sigma = self.separation(i, j)
+        d, sigma = self.separation(i, j)
         dd = d.norm_sqr()
         if dd < sigma * sigma:
+            u = self.rel_velocity(i, j)
             rel = 1 - ti.sqrt(dd) / sigma
             if self.approaching(dd, d.dot(u), u.norm_sqr()):
                 cj = self.grid.coords(self.grid.cell_of[j])
@@ -218,9 +225,10 @@ class Contacts:
                             q0 = pa + 1
                         for q in range(q0, self.grid.start[kb + 1]):
                             j = self.grid.order[q]
-                            d, u, sigma = self.separation(i, j)
+                            d, sigma = self.separation(i, j)
                             dd = d.norm_sqr()
                             if dd < sigma * sigma:
+                                u = self.rel_velocity(i, j)
                                 du = d.dot(u)
                                 uu = u.norm_sqr()
                                 if self.approaching(dd, du, uu):
@@ -285,7 +293,8 @@ class Contacts:
                     for q in range(self.grid.start[kj], self.grid.start[kj + 1]):
                         j = self.grid.order[q]
                         if k > 0 or j > i:
-                            d, u, sigma = self.separation(i, j)
+                            d, sigma = self.separation(i, j)
+                            u = self.rel_velocity(i, j)
                             dd = d.norm_sqr()
                             if dd < sigma * sigma and self.approaching(dd, d.dot(u), u.norm_sqr()):
                                 slot = ti.atomic_add(counter[0], 1)

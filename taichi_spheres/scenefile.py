@@ -31,16 +31,21 @@ from .scene import DEFAULT_DENSITY, Scene
 
 __all__ = ["load_scene", "scene_from_dict", "SceneFileError"]
 
-_TOP = {"name": str, "box": dict, "physics": dict, "run": dict,
+_TOP = {"name": str, "box": dict, "physics": dict, "run": dict, "render": dict,
         "spheres": list, "lattice": list, "random": list}
+_RENDER = {"width": int, "height": int, "camera_position": "vec3", "camera_lookat": "vec3",
+           "fov": float, "colours": str, "background": "vec3"}
 _BOX = {"lo": "vec3", "hi": "vec3", "periodic": "bool3", "wall_restitution": float}
 _PHYSICS = {"gravity": "vec3", "restitution": float, "step_fraction": float,
             "max_sweeps": int, "precision": str}
 _RUN = {"duration": float, "fps": float}
-_SPHERE = {"x": "vec3", "v": "vec3", "radius": float, "mass": float, "density": float}
-_LATTICE = {"lo": "vec3", "hi": "vec3", "spacing": float, "radius": float, "mass": float,
+_SPHERE = {"colour": "vec3", "x": "vec3", "v": "vec3", "radius": float, "mass": float,
+           "density": float}
+_LATTICE = {"colour": "vec3", "lo": "vec3", "hi": "vec3", "spacing": float, "radius": float,
+            "mass": float,
             "density": float, "v": "vec3", "speed": float, "seed": int}
-_RANDOM = {"count": int, "lo": "vec3", "hi": "vec3", "radius": float, "mass": float,
+_RANDOM = {"colour": "vec3", "count": int, "lo": "vec3", "hi": "vec3", "radius": float,
+           "mass": float,
            "density": float, "v": "vec3", "speed": float, "seed": int}
 
 
@@ -78,6 +83,8 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
     box = _table(data, "box", _BOX, problems)
     physics = _table(data, "physics", _PHYSICS, problems)
     run = _table(data, "run", _RUN, problems)
+    render = _table(data, "render", _RENDER, problems)
+    _check_render(render, run, problems)
     groups = []
     for key, schema in (("spheres", _SPHERE), ("lattice", _LATTICE), ("random", _RANDOM)):
         items = data.get(key, [])
@@ -98,7 +105,7 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
     _check_values(box, physics, problems)
     if not groups and not problems:
         problems.append("no spheres: add [[spheres]], [[lattice]] or [[random]] tables")
-    arrays = {"x": [], "v": [], "radius": [], "mass": []}
+    arrays = {"x": [], "v": [], "radius": [], "mass": [], "group": []}
     if not problems:
         for kind, where, item in groups:
             try:
@@ -119,8 +126,25 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
             name=data.get("name", "scene"))
     except ValueError as exc:
         raise SceneFileError(source, [str(exc) + _origins(str(exc), groups, arrays)]) from None
-    meta = {"run": run, "physics": physics, "source": source}
+    colours = np.array([item.get("colour", [-1.0, -1.0, -1.0]) for _, _, item in groups],
+                       dtype=np.float64)
+    meta = {"run": run, "physics": physics, "render": render, "source": source,
+            "groups": np.concatenate(arrays["group"]), "group_colours": colours}
     return dataclasses.replace(scene, meta=meta)
+
+
+def _check_render(render, run, problems):
+    for key in ("width", "height"):
+        if key in render and isinstance(render[key], int) and (render[key] <= 0 or render[key] % 16):
+            problems.append(f"render.{key}: must be a positive multiple of 16 (H.264 blocks), "
+                            f"got {render[key]}")
+    if "colours" in render and render["colours"] not in ("group", "speed"):
+        problems.append(f"render.colours: must be \"group\" or \"speed\", got {render['colours']!r}")
+    if "fov" in render and _is_number(render["fov"]) and not 0 < render["fov"] < 180:
+        problems.append(f"render.fov: must be in (0, 180) degrees, got {render['fov']}")
+    for key in ("duration", "fps"):
+        if key in run and _is_number(run[key]) and not run[key] > 0:
+            problems.append(f"run.{key}: must be > 0, got {run[key]}")
 
 
 def _table(data, key, schema, problems):
@@ -324,6 +348,7 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=Fals
     arrays["v"].append(_velocities(item, count, rng))
     arrays["radius"].append(radius)
     arrays["mass"].append(_mass_of(item, radius, where, count))
+    arrays["group"].append(np.full(count, len(arrays["group"]), dtype=np.int64))
 
 
 def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=200,

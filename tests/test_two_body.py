@@ -206,11 +206,16 @@ def test_pair_collisions_closed_form(arch, precision, e):
     sim.advance(T_END)
     st = sim.state()
     steps = sim.stats["steps"]
-    assert sim.stats["pair_collisions"] >= len(PAIR_CASES)
-    assert sim.stats["unresolved"] == 0
-
     X = np.abs(xs).max() + np.abs(vs).max() * T_END          # coordinate scale [m]
     budget = tol(precision, ROUNDOFF_PER_STEP * steps)
+    if e > 0:
+        assert sim.stats["pair_collisions"] == len(PAIR_CASES)
+    else:
+        # e = 0 head-on: the pair travels on touching; a round-off re-contact may add
+        # a (round-off sized) impulse, which the velocity checks below bound
+        assert sim.stats["pair_collisions"] >= len(PAIR_CASES)
+    assert sim.stats["unresolved"] == 0
+    assert sim.stats["max_overlap"] <= budget
     worst = dict(v=0.0, x=0.0, p=0.0, ke=0.0)
     for k, (bf, m1, m2, r1, r2, _) in enumerate(PAIR_CASES):
         i, j = 2 * k, 2 * k + 1
@@ -265,18 +270,17 @@ def test_seed_angular_form_agrees_away_from_horizontal():
     m2 = np.exp(rng.uniform(-3.0, 3.0, (k, 1)))
     a1, a2 = seed_angular(v1, v2, m1, m2, np.tan(theta), np.cos(phi), np.sin(phi))
     b1, b2 = impulse_form(v1, v2, m1, m2, n)
-    # both are O(1) operations on O(|v|) numbers; tan theta enters squared, so its
+    # both are a few operations on O(|v|) numbers; tan theta enters squared, so its
     # rounding is amplified by at most (1 + tan^2 theta) <= 1/cos^2(80 deg) ~ 33
     amp = 1.0 + np.tan(theta) ** 2
-    mass_ratio = np.maximum(m1 / m2, m2 / m1)[:, 0]
-    scale = (np.linalg.norm(v1, axis=1) + np.linalg.norm(v2, axis=1)) * amp * (1.0 + mass_ratio)
-    err = np.maximum(np.abs(a1 - b1).max(axis=1), np.abs(a2 - b2).max(axis=1)) / scale
+    speed = np.linalg.norm(v1, axis=1) + np.linalg.norm(v2, axis=1)
+    err = np.maximum(np.abs(a1 - b1).max(axis=1), np.abs(a2 - b2).max(axis=1)) / speed
     assert np.isfinite(a1).all() and np.isfinite(a2).all()
-    assert err.max() <= tol("f64", FEW_ROUNDINGS), err.max()
+    assert np.all(err <= tol("f64", FEW_ROUNDINGS) * amp), (err / amp).max()
     # and the collision did something: not a vacuous agreement
     assert np.median(np.abs(b1 - v1).max(axis=1)) > 0.1
-    print(f"\n[angular vs impulse, 80 deg] worst error {err.max() / EPS['f64']:.3g} eps "
-          f"(relative to |v| (1+tan^2) (1+mass ratio))")
+    report("angular vs impulse form, theta within 80 deg of z, f64", v=err.max(),
+           v_over_amplification=(err / amp).max())
 
 
 def test_seed_angular_form_loses_precision_near_horizontal():

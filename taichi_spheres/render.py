@@ -1,0 +1,124 @@
+"""Render (output stage): offscreen GGUI frames of a State snapshot.
+
+The renderer never sees the simulation, only numpy snapshots (``State``), which it
+uploads into its own float32 fields. GGUI needs Vulkan: on a machine without a GPU,
+Debian's ``mesa-vulkan-drivers`` (lavapipe) provides it on the CPU.
+"""
+from __future__ import annotations
+
+import numpy as np
+import taichi as ti
+
+__all__ = ["Renderer", "RenderUnavailable", "palette", "VULKAN_HINT"]
+
+VULKAN_HINT = ("offscreen rendering needs Vulkan; on Debian/Ubuntu install it with "
+               "'sudo apt-get install mesa-vulkan-drivers libvulkan1' (lavapipe renders on "
+               "the CPU), or run with --no-video for diagnostics only")
+
+_PALETTE = np.array([
+    [0.90, 0.30, 0.25], [0.25, 0.55, 0.90], [0.35, 0.75, 0.35], [0.95, 0.70, 0.20],
+    [0.65, 0.40, 0.85], [0.20, 0.75, 0.75], [0.90, 0.50, 0.70], [0.60, 0.60, 0.60]],
+    dtype=np.float32)
+
+
+class RenderUnavailable(RuntimeError):
+    """GGUI could not start (no Vulkan)."""
+
+
+def palette(groups: np.ndarray) -> np.ndarray:
+    """(N,) int group ids -> (N, 3) float32 RGB in [0, 1]."""
+    return _PALETTE[np.asarray(groups) % len(_PALETTE)]
+
+
+def speed_colours(v: np.ndarray, vmax: float) -> np.ndarray:
+    """Blue (still) to red (>= vmax) by speed, (N, 3) float32."""
+    t = np.clip(np.linalg.norm(v, axis=1) / max(vmax, 1e-300), 0.0, 1.0)[:, None]
+    cold = np.array([0.20, 0.35, 0.85], dtype=np.float32)
+    hot = np.array([0.95, 0.25, 0.15], dtype=np.float32)
+    return ((1 - t) * cold + t * hot).astype(np.float32)
+
+
+class Renderer:
+    """Offscreen GGUI renderer for one scene.
+
+    size: (width, height) in pixels, both divisible by 16 (H.264 macro blocks).
+    camera: dict with optional 'position', 'lookat' (3 numbers, m) and 'fov' (deg);
+    default: looking at the box centre from the front (-y), slightly above.
+    colours: 'group' (``colour_table``, (N, 3) RGB in [0, 1], default one colour) or
+    'speed' (blue to red).
+    """
+
+    def __init__(self, scene, size=(640, 480), camera=None, colours="group", colour_table=None,
+                 background=(0.08, 0.08, 0.10)):
+        width, height = int(size[0]), int(size[1])
+        if width % 16 or height % 16 or width <= 0 or height <= 0:
+            raise ValueError(f"size {width}x{height}: width and height must be positive "
+                             f"multiples of 16")
+        if colours not in ("group", "speed"):
+            raise ValueError(f"colours must be 'group' or 'speed', got {colours!r}")
+        self.size = (width, height)
+        self.scene = scene
+        self.colours = colours
+        self.background = tuple(float(c) for c in background)
+        try:
+            self.window = ti.ui.Window("taichi_spheres", self.size, show_window=False,
+                                       vsync=False)
+        except Exception as exc:   # GGUI raises RuntimeError (or worse) without Vulkan
+            raise RenderUnavailable(f"{exc}. {VULKAN_HINT}") from exc
+        self.canvas = self.window.get_canvas()
+        self.gscene = self.window.get_scene()
+        self.camera = ti.ui.Camera()
+        n = scene.n
+        self.pos = ti.Vector.field(3, ti.f32, shape=n)
+        self.rad = ti.field(ti.f32, shape=n)
+        self.col = ti.Vector.field(3, ti.f32, shape=n)
+        self.rad.from_numpy(scene.radius.astype(np.float32))
+        table = palette(np.zeros(n, dtype=np.int64)) if colour_table is None else colour_table
+        self.col.from_numpy(np.ascontiguousarray(table, dtype=np.float32))
+        self.edges = ti.Vector.field(3, ti.f32, shape=24)
+        self.edges.from_numpy(_box_edges(scene.box_lo, scene.box_hi))
+        lo, hi = scene.box_lo, scene.box_hi
+        centre = 0.5 * (lo + hi)
+        extent = float(np.max(hi - lo))
+        cam = dict(camera or {})
+        position = cam.get("position", (centre[0], lo[1] - 1.6 * extent, centre[2] + 0.6 * extent))
+        lookat = cam.get("lookat", tuple(centre))
+        self.camera.position(*map(float, position))
+        self.camera.lookat(*map(float, lookat))
+        self.camera.up(0.0, 0.0, 1.0)
+        self.camera.fov(float(cam.get("fov", 45.0)))
+        self.light = (centre[0] - extent, lo[1] - 2.0 * extent, hi[2] + 2.0 * extent)
+        self._vmax = None
+
+    def frame(self, state) -> np.ndarray:
+        """Render a State; returns an (height, width, 3) uint8 RGB image, row 0 at the top."""
+        self.pos.from_numpy(state.x.astype(np.float32))
+        if self.colours == "speed":
+            if self._vmax is None:   # fixed scale from the first frame: colours comparable
+                self._vmax = float(np.linalg.norm(state.v, axis=1).max()) or 1.0
+            self.col.from_numpy(speed_colours(state.v, self._vmax))
+        self.canvas.set_background_color(self.background)
+        self.gscene.set_camera(self.camera)
+        self.gscene.ambient_light((0.35, 0.35, 0.35))
+        self.gscene.point_light(pos=tuple(map(float, self.light)), color=(0.9, 0.9, 0.9))
+        self.gscene.particles(self.pos, radius=float(self.scene.radius.max()),
+                              per_vertex_color=self.col, per_vertex_radius=self.rad)
+        self.gscene.lines(self.edges, width=2.0, color=(0.75, 0.75, 0.75))
+        self.canvas.scene(self.gscene)
+        img = self.window.get_image_buffer_as_numpy()     # (width, height, 4), origin bottom-left
+        rgb = np.ascontiguousarray(np.flipud(np.transpose(img[:, :, :3], (1, 0, 2))))
+        return (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+    def close(self):
+        try:
+            self.window.destroy()
+        except Exception:   # already gone with the Taichi runtime
+            pass
+
+
+def _box_edges(lo, hi) -> np.ndarray:
+    """The 12 edges of the box as 24 line end points, (24, 3) float32."""
+    corners = np.array([[lo[0] if i & 1 == 0 else hi[0], lo[1] if i & 2 == 0 else hi[1],
+                         lo[2] if i & 4 == 0 else hi[2]] for i in range(8)], dtype=np.float32)
+    pairs = [(a, b) for a in range(8) for b in range(a + 1, 8) if bin(a ^ b).count("1") == 1]
+    return np.array([corners[k] for ab in pairs for k in ab], dtype=np.float32)
