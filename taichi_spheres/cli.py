@@ -72,6 +72,11 @@ def build_parser():
     run.add_argument("--no-video", action="store_true", help="diagnostics only, no rendering")
     run.add_argument("--npz", action="store_true",
                      help="also write OUT.npz with positions and velocities of every frame")
+    run.add_argument("--checkpoint-every", type=_positive(int), default=None, metavar="FRAMES",
+                     help="write OUT.ckpt.npz every FRAMES frames (overwritten each time)")
+    run.add_argument("--resume", default=None, metavar="CHECKPOINT",
+                     help="continue a run from its OUT.ckpt.npz; the result is bit-identical "
+                          "to an uninterrupted run with the same options")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     info = sub.add_parser("info", help="validate a scene and show what it compiles in")
     info.add_argument("scene")
@@ -163,6 +168,7 @@ class Progress:
 
 
 def cmd_run(scene: Scene, args):
+    from . import checkpoint
     from .output import DiagnosticsWriter, VideoWriter, check_writable
     from .simulation import DEFAULT_MAX_SWEEPS, DEFAULT_STEP_FRACTION, Simulation
     run, physics, render = _settings(scene)
@@ -185,9 +191,13 @@ def cmd_run(scene: Scene, args):
                          precision=args.precision or physics.get("precision"),
                          step_fraction=physics.get("step_fraction", DEFAULT_STEP_FRACTION),
                          max_sweeps=physics.get("max_sweeps", DEFAULT_MAX_SWEEPS))
+        start_frame = 0
+        if args.resume:
+            start_frame = checkpoint.load(args.resume, sim, scene, fps) + 1
     except (ValueError, RuntimeError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    ckpt_path = stem + ".ckpt.npz"
     renderer = None
     if not args.no_video:
         from .render import RenderUnavailable, Renderer, palette
@@ -214,14 +224,17 @@ def cmd_run(scene: Scene, args):
           f"renderer: {'none (--no-video)' if renderer is None else 'GGUI offscreen'}",
           file=sys.stderr)
     progress = Progress(frames, duration, args.quiet)
+    earlier = checkpoint.set_aside(video_path) if renderer is not None and start_frame else None
     video = VideoWriter(video_path, fps) if renderer is not None else None
-    diag = DiagnosticsWriter(csv_path, scene.gravity)
+    if earlier:
+        checkpoint.copy_video_prefix(earlier, video, start_frame)
+    diag = DiagnosticsWriter(csv_path, scene.gravity, keep_frames=start_frame)
     snaps_x, snaps_v, snaps_t = [], [], []
     render_seconds = 0.0
     status = 0
     frame = -1
     try:
-        for frame in range(frames):
+        for frame in range(start_frame, frames):
             sim.advance_to(frame / fps)
             st = sim.state()
             diag.write(frame, st, sim.stats)
@@ -233,10 +246,14 @@ def cmd_run(scene: Scene, args):
                 t0 = time.perf_counter()
                 video.write(renderer.frame(st))
                 render_seconds += time.perf_counter() - t0
+            if args.checkpoint_every and (frame + 1) % args.checkpoint_every == 0:
+                checkpoint.save(ckpt_path, sim, scene, frame, fps)
             progress.update(frame, sim, final=frame == frames - 1)
     except KeyboardInterrupt:
         status = EXIT_INTERRUPTED
-        print(f"\ninterrupted at frame {frame} (t = {sim.time:.4g} s)", file=sys.stderr)
+        print(f"\ninterrupted at frame {frame} (t = {sim.time:.4g} s)"
+              + (f"; continue with --resume {ckpt_path}" if args.checkpoint_every else ""),
+              file=sys.stderr)
     except Exception as exc:   # keep what was written, then re-raise after closing
         status = 1
         print(f"\nerror at frame {frame}: {exc!r}", file=sys.stderr)
@@ -251,7 +268,8 @@ def cmd_run(scene: Scene, args):
         if renderer is not None:
             renderer.close()
         written = [p for p, on in ((video_path, video is not None), (csv_path, True),
-                                   (npz_path, args.npz and bool(snaps_x))) if on]
+                                   (npz_path, args.npz and bool(snaps_x)),
+                                   (ckpt_path, bool(args.checkpoint_every))) if on]
         print(f"wrote {', '.join(written)} ({diag.rows} frames)", file=sys.stderr)
     st = sim.stats
     print(f"simulation: {sim.sim_seconds:.2f} s wall for {sim.time:g} s simulated, "

@@ -30,6 +30,9 @@ from .walls import Motion
 
 STENCIL = FORWARD_OFFSETS + tuple(tuple(-c for c in o) for o in FORWARD_OFFSETS[1:])
 
+#: Below this many pending pairs a CPU sweep runs its loops serially.
+FEW_PAIRS = 1000
+
 #: Upper bound on collisions one owner cell resolves in one sweep (the rest wait
 #: for the next sweep).
 MAX_BLOCK_COLLISIONS = 64
@@ -44,7 +47,8 @@ class Contacts:
     """
 
     def __init__(self, state: SphereState, grid: Grid, params: StepParams, motion: Motion,
-                 features: Features, serial_light: bool, serial_heavy: bool):
+                 features: Features, serial_light: bool, serial_heavy: bool,
+                 serial_few: bool = False):
         self.state = state
         self.grid = grid
         self.params = params
@@ -54,9 +58,13 @@ class Contacts:
         self.n = state.n
         self.serial_light = serial_light
         self.serial_heavy = serial_heavy
+        # only worth a second compiled variant where the loops are otherwise parallel
+        self.serial_few = serial_few and not serial_heavy
         eps = float(np.finfo(np.float64 if self.real == ti.f64 else np.float32).eps)
         self.approach_eps = 8.0 * eps
         self.active = ti.field(ti.i32, shape=grid.m)
+        # the pair that made a cell active; used directly when it is the only one
+        self.first_pair = ti.Vector.field(2, ti.i32, shape=grid.m)
         # stencils as small tables walked by runtime loops (unrolling them multiplies
         # compile time); STENCIL = (0,0,0), 13 forward offsets, then their negatives
         self.stencil = ti.Vector.field(3, ti.i32, shape=len(STENCIL))
@@ -151,7 +159,8 @@ class Contacts:
             if self.approaching(dd, d.dot(u), u.norm_sqr()):
                 cj = self.grid.coords(self.grid.cell_of[j])
                 owner = self.grid.linear(self.grid.owner(ci, cj))
-                ti.atomic_add(self.active[owner], 1)
+                if ti.atomic_add(self.active[owner], 1) == 0:
+                    self.first_pair[owner] = ti.Vector([i, j])
                 ti.atomic_add(self.params.count[REMAINING], 1)
                 ti.atomic_max(self.params.vals[OPEN_OVERLAP], rel)
             else:
@@ -184,10 +193,10 @@ class Contacts:
                     self.examine(i, self.grid.order[q], ci)
 
     @ti.func
-    def detect_from_modified(self):
+    def detect_from_modified(self, serial: ti.template()):
         """Full-stencil scan (9 rows along z) from spheres touched in this sweep; a
         pair of two touched spheres is examined once, from the lower id."""
-        ti.loop_config(serialize=ti.static(self.serial_heavy))
+        ti.loop_config(serialize=ti.static(self.serial_heavy or serial))
         for i in range(self.n):
             if self.state.modified[i]:
                 ci = self.grid.coords(self.grid.cell_of[i])
@@ -204,6 +213,21 @@ class Contacts:
             self.examine(i, j, ci)
 
     # ---- resolution ----
+    @ti.func
+    def resolve_single(self, pair):
+        """Collide the one pair a cell owns, if it still overlaps and approaches (an
+        earlier colour of this sweep may have changed it)."""
+        i = pair[0]
+        j = pair[1]
+        d, sigma = self.separation(i, j)
+        dd = d.norm_sqr()
+        if dd < sigma * sigma:
+            u = self.rel_velocity(i, j)
+            du = d.dot(u)
+            uu = u.norm_sqr()
+            if self.approaching(dd, du, uu):
+                self.collide(i, j, self.time_since_contact(dd, du, uu, sigma))
+
     @ti.func
     def resolve_block(self, c, budget):
         """Collide up to ``budget`` overlapping approaching pairs owned by cell c
@@ -242,43 +266,49 @@ class Contacts:
             self.collide(bi, bj, best_s)
 
     @ti.func
-    def resolve_colour(self, colour: ti.template()):
+    def resolve_colour(self, colour: ti.template(), serial: ti.template()):
         """One parallel pass over the owner cells of one colour, whose blocks are
         disjoint; colour = ((start, stride, count) per axis)."""
-        ti.loop_config(serialize=ti.static(self.serial_heavy))
+        ti.loop_config(serialize=ti.static(self.serial_heavy or serial))
         for I in ti.grouped(ti.ndrange(colour[0][2], colour[1][2], colour[2][2])):
             c = ti.Vector([colour[0][0] + colour[0][1] * I[0], colour[1][0] + colour[1][1] * I[1],
                            colour[2][0] + colour[2][1] * I[2]])
             k = self.grid.linear(c)
             budget = self.active[k]
-            if budget > 0:
+            if budget == 1:
+                self.resolve_single(self.first_pair[k])
+                self.active[k] = 0
+            elif budget > 1:
                 self.resolve_block(c, ti.min(budget, MAX_BLOCK_COLLISIONS))
                 self.active[k] = 0
 
     @ti.kernel
-    def resolve_colours(self):
+    def resolve_colours(self, serial: ti.template()):
         """Every colour in turn, each a parallel loop (one launch for all)."""
         for k in ti.static(range(len(self.colours))):
-            self.resolve_colour(self.colours[k])
+            self.resolve_colour(self.colours[k], serial)
 
     @ti.kernel
-    def after_sweep(self):
+    def after_sweep(self, serial: ti.template()):
         """Put the spheres a sweep touched back inside the box, detect new approaching
         overlaps around them, and clear their marks."""
-        ti.loop_config(serialize=ti.static(self.serial_light))
+        ti.loop_config(serialize=ti.static(self.serial_light or serial))
         for i in range(self.n):
             if self.state.modified[i]:
                 self.motion.walls_and_wrap(i)
         self.params.reset_detection()
-        self.detect_from_modified()
-        ti.loop_config(serialize=ti.static(self.serial_light))
+        self.detect_from_modified(serial)
+        ti.loop_config(serialize=ti.static(self.serial_light or serial))
         for i in range(self.n):
             self.state.modified[i] = 0
 
-    def sweep(self):
-        """Resolve every colour in turn, then :meth:`after_sweep`."""
-        self.resolve_colours()
-        self.after_sweep()
+    def sweep(self, pending):
+        """Resolve every colour in turn, then :meth:`after_sweep`. With few pending
+        pairs on the CPU the loops run serially: a parallel launch there costs more
+        than the work (a second compiled variant, built on first use)."""
+        serial = bool(self.serial_few and pending <= FEW_PAIRS)
+        self.resolve_colours(serial)
+        self.after_sweep(serial)
 
     # ---- debugging / tests ----
     @ti.kernel

@@ -56,13 +56,19 @@ class VideoWriter:
 class DiagnosticsWriter:
     """One CSV row per frame: energies [J], momentum [kg m/s], cumulative counters."""
 
-    def __init__(self, path: str, gravity):
+    def __init__(self, path: str, gravity, keep_frames: int = 0):
+        """keep_frames > 0 (resuming): keep the first keep_frames rows of an existing file."""
         self.path = path
         self.gravity = np.asarray(gravity, dtype=np.float64)
+        kept = []
+        if keep_frames and os.path.exists(path):
+            with open(path, newline="") as fh:
+                kept = [row for row in csv.reader(fh)][1:keep_frames + 1]
         self._fh = open(path, "w", newline="")
         self._csv = csv.writer(self._fh)
         self._csv.writerow(CSV_COLUMNS)
-        self.rows = 0
+        self._csv.writerows(kept)
+        self.rows = len(kept)
 
     def write(self, frame: int, state, stats: dict) -> dict:
         ke = observe.kinetic_energy(state)

@@ -6,6 +6,8 @@ Debian's ``mesa-vulkan-drivers`` (lavapipe) provides it on the CPU.
 """
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import taichi as ti
 
@@ -60,6 +62,8 @@ class Renderer:
         self.scene = scene
         self.colours = colours
         self.background = tuple(float(c) for c in background)
+        # GGUI's imgui writes imgui.ini into the working directory: remove ours on close
+        self._ini_existed = os.path.exists("imgui.ini")
         try:
             self.window = ti.ui.Window("taichi_spheres", self.size, show_window=False,
                                        vsync=False)
@@ -114,6 +118,8 @@ class Renderer:
             self.window.destroy()
         except Exception:   # already gone with the Taichi runtime
             pass
+        if not self._ini_existed and os.path.exists("imgui.ini"):
+            os.remove("imgui.ini")
 
 
 def _box_edges(lo, hi) -> np.ndarray:

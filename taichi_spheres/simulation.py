@@ -82,7 +82,7 @@ class Simulation:
         self._motion = Motion(self._state, self._params, self.features, serial_light)
         self._grid = Grid(self.geometry, self._state, serial_light)
         self._contacts = Contacts(self._state, self._grid, self._params, self._motion,
-                                  self.features, serial_light, serial_heavy)
+                                  self.features, serial_light, serial_heavy, serial_few=cpu)
         self._r_min = float(scene.radius.min())
         self._g = float(np.linalg.norm(scene.gravity))
         self.time = 0.0
@@ -131,6 +131,27 @@ class Simulation:
         self._motion.measure_vmax()
         self._vmax2 = float(self._params.vals[VMAX2])
 
+    def checkpoint(self) -> dict:
+        """Everything needed to continue bit-for-bit: state, time, step bound, counters."""
+        self._check()
+        return dict(x=self._state.positions(), v=self._state.velocities(), time=self.time,
+                    vmax2=self._vmax2, totals=dict(self._totals), last_step=dict(self.last_step),
+                    n=self.n, precision=self.precision, step_fraction=self.step_fraction,
+                    max_sweeps=self.max_sweeps)
+
+    def restore(self, ckpt: dict) -> None:
+        """Continue from :meth:`checkpoint` output of a Simulation of the same scene,
+        precision and settings (ValueError otherwise)."""
+        for key in ("n", "precision", "step_fraction", "max_sweeps"):
+            mine = getattr(self, key)
+            if ckpt[key] != mine:
+                raise ValueError(f"checkpoint {key} = {ckpt[key]!r} does not match this "
+                                 f"simulation's {mine!r}")
+        self.set_state(ckpt["x"], ckpt["v"], ckpt["time"])
+        self._vmax2 = float(ckpt["vmax2"])
+        self._totals = dict(ckpt["totals"])
+        self.last_step = dict(ckpt["last_step"])
+
     def advance(self, duration: float) -> None:
         """Advance simulated time by ``duration`` seconds with adaptive steps."""
         duration = float(duration)
@@ -174,7 +195,7 @@ class Simulation:
         remaining = count[REMAINING]
         sweeps = 0
         while remaining > 0 and sweeps < self.max_sweeps:
-            self._contacts.sweep()
+            self._contacts.sweep(remaining)
             sweeps += 1
             remaining = count[REMAINING]
             if remaining > 0 and vals[MOVED] > self.geometry.slack:

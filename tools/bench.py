@@ -3,7 +3,7 @@
 
 Reports sphere-steps per second, collisions per second, the cost of a full step
 against a bare grid pass (drift + grid build + neighbour scan, the same kernels the
-step uses, timed in the same run), and the effect of compiled-out features.
+step uses, timed on the same states), and the effect of compiled-out features.
 Writes docs/bench.md (with date, hardware and the command) unless --no-write.
 
     python tools/bench.py                       # CPU, N = 1e3, 1e4, 1e5, f64 and f32
@@ -50,33 +50,35 @@ def gpu_name():
 
 
 def timed_steps(sim, min_seconds, min_steps):
-    """Run whole steps until both minima are reached; return (steps, seconds, collisions)."""
-    c0 = sim.stats["pair_collisions"]
-    steps = 0
-    ti.sync()
-    t0 = time.perf_counter()
-    while True:
-        sim.step(sim.max_step())
-        steps += 1
-        if steps >= min_steps and time.perf_counter() - t0 >= min_seconds:
-            break
-    ti.sync()
-    return steps, time.perf_counter() - t0, sim.stats["pair_collisions"] - c0
-
-
-def bare_pass_seconds(sim, reps):
-    """Seconds per bare grid pass: drift + grid build + neighbour scan (no resolution)."""
+    """Alternate, on the same states, a bare grid pass (drift + grid build + neighbour
+    scan, then the state is put back) and a full step; run until both minima are met.
+    Returns (steps, full seconds, bare seconds, collisions)."""
     motion, grid, contacts = sim._motion, sim._grid, sim._contacts
-    sim._params.h[None] = sim.max_step()
-    ti.sync()
-    t0 = time.perf_counter()
-    for _ in range(reps):
+    c0 = sim.stats["pair_collisions"]
+    steps, full, bare = 0, 0.0, 0.0
+    while True:
+        h = sim.max_step()
+        st = sim.state()                       # untimed snapshot
+        vmax2 = sim._vmax2
+        ti.sync()
+        t0 = time.perf_counter()
+        sim._params.h[None] = h
         motion.drift()
         grid.build()
         contacts.detect_all()
-        _ = sim._params.count[0]     # the step reads this too
-    ti.sync()
-    return (time.perf_counter() - t0) / reps
+        _ = sim._params.count[0]               # the step reads this too
+        ti.sync()
+        bare += time.perf_counter() - t0
+        sim.set_state(st.x, st.v)              # untimed: back to the same state
+        sim._vmax2 = vmax2
+        t0 = time.perf_counter()
+        sim.step(h)
+        ti.sync()
+        full += time.perf_counter() - t0
+        steps += 1
+        if steps >= min_steps and full >= min_seconds:
+            break
+    return steps, full, bare, sim.stats["pair_collisions"] - c0
 
 
 def measure(scene, arch, precision, min_seconds):
@@ -85,8 +87,8 @@ def measure(scene, arch, precision, min_seconds):
     for _ in range(3):                      # compile and warm up
         sim.step(sim.max_step())
     compile_s = time.perf_counter() - t0
-    steps, secs, coll = timed_steps(sim, min_seconds, 10)
-    bare = bare_pass_seconds(sim, max(3, min(steps, 50)))
+    steps, secs, bare_total, coll = timed_steps(sim, min_seconds, 10)
+    bare = bare_total / steps
     n = scene.n
     return dict(n=n, precision=precision, steps=steps, seconds=secs,
                 sphere_steps=n * steps / secs, collisions=coll / secs,
@@ -150,8 +152,8 @@ def main():
         "Scene: N spheres of radius 0.5 m on a jittered lattice in a periodic cube at packing "
         "fraction 0.3, Gaussian velocities (rms 1 m/s per component), no gravity, e = 1; "
         "default step_fraction 0.1. A *sphere-step* is one sphere advanced by one adaptive "
-        "step. *Bare pass* = drift + grid build + neighbour scan (the same kernels, timed in "
-        "the same run); *ratio* = full step / bare pass.",
+        "step. *Bare pass* = drift + grid build + neighbour scan (the same kernels, timed on "
+        "the same states as the steps); *ratio* = full step / bare pass.",
         "",
         "| N | precision | sphere-steps/s | collisions/s | ms/step | bare pass ms | ratio | "
         "sweeps/step | compile+warm-up s |",
