@@ -10,8 +10,11 @@ contact ``s`` is the smallest root of ``g/2 s^2 - w s + d = 0`` at which the
 sphere was moving into the wall (``w - g s < 0``). The normal velocity at contact
 is reversed and scaled by the wall restitution, and the sphere is carried forward
 by ``s`` on its new path. A sphere whose penetration is not explained by a
-crossing on its current ballistic path (a pair collision carried it there) is
-mirrored back into the box and its inward velocity reflected at once. A sphere
+crossing on its current ballistic path (a pair collision carried it there, or it
+rests on the wall under gravity) is put back: without gravity on that axis it is
+mirrored into the box and its inward velocity reflected; with gravity it is placed
+on the wall and the potential energy of that lift is taken from its normal kinetic
+energy, so the total never grows (counted in ``stats['wall_rests']``). A sphere
 that re-crosses within the same step (small e under gravity) bounces again, up to
 ``MAX_WALL_BOUNCES`` times; if it is still past the wall then, it is put on the
 wall and its velocity into the wall is zeroed — a "wall rest" that never adds
@@ -122,19 +125,35 @@ class Motion:
                             ti.atomic_add(self.params.count[WALLS], 1)
                             bounced = True
                         if not bounced and bounce < MAX_WALL_BOUNCES:
-                            # past the wall without a crossing on its current path (a
-                            # pair collision carried it there): reflect it now, mirroring
-                            # the position into the box
-                            wn = w
-                            if w < 0:
-                                wn = -e_w * w
-                            if side < 0:
-                                x[a] = lo_c - d
+                            # past the wall without a crossing on its current path: a
+                            # pair collision carried it there, or it rests on the wall
+                            if ti.static(not self.f.gravity_axes[a]):
+                                # mirror into the box and reflect (energy exact for e=1)
+                                wn = w
+                                if w < 0:
+                                    wn = -e_w * w
+                                if side < 0:
+                                    x[a] = lo_c - d
+                                else:
+                                    x[a] = hi_c + d
+                                v[a] = wn * side * -1
+                                moved += -2 * d
+                                ti.atomic_add(self.params.count[WALLS], 1)
                             else:
-                                x[a] = hi_c + d
-                            v[a] = wn * side * -1
-                            moved += -2 * d
-                            ti.atomic_add(self.params.count[WALLS], 1)
+                                # put it on the wall and pay the potential energy of the
+                                # lift -acc*d out of its normal kinetic energy, so energy
+                                # never grows (a sphere resting under gravity stays at rest)
+                                w2 = ti.max(w * w - 2 * acc * d, 0)
+                                wn = ti.sqrt(w2)
+                                if w < 0:
+                                    wn *= e_w
+                                if side < 0:
+                                    x[a] = lo_c
+                                else:
+                                    x[a] = hi_c
+                                v[a] = wn * side * -1
+                                moved += -d
+                                ti.atomic_add(self.params.count[WALL_RESTS], 1)
                             bounced = True
                         if not bounced:
                             # still past the wall after MAX_WALL_BOUNCES: rest on it
