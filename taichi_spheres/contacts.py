@@ -42,8 +42,10 @@ MAX_BLOCK_COLLISIONS = 64
 class Contacts:
     """Detection and colour-by-colour resolution of overlapping approaching pairs.
 
-    Fields: active (M,) i32 — approaching overlapping pairs owned by each cell,
-    found by the last detection pass. Debug: pairs (K, 2) i32 for tests.
+    Fields: active (M,) i32 — approaching overlapping pairs owned by each cell, found
+    by the last detection pass; first_pair (M,) vec2 i32 — one of them; active_list
+    (M,) / n_active — the cells with active > 0; touched (N,) / n_touched — spheres a
+    sweep changed (their ``state.modified`` flag is set).
     """
 
     def __init__(self, state: SphereState, grid: Grid, params: StepParams, motion: Motion,
@@ -76,7 +78,39 @@ class Contacts:
         self.block = ti.Vector.field(3, ti.i32, shape=(len(BLOCK_PAIRS), 2))
         self.block.from_numpy(np.array(BLOCK_PAIRS, dtype=np.int32))
         self.colours = grid.geom.colours
-        self.debug_pairs = None
+        self.axis_colours = tuple(len(grid.geom.axis_colours(a)) for a in range(3))
+        # compact lists, so that sweeps cost O(pairs) and not O(N + cells): the cells
+        # with pending pairs, and the spheres a sweep touched (order is thread-dependent,
+        # but every use is order-independent: disjoint blocks, per-sphere updates)
+        self.active_list = ti.field(ti.i32, shape=grid.m)
+        self.n_active = ti.field(ti.i32, shape=())
+        self.touched = ti.field(ti.i32, shape=self.n)
+        self.n_touched = ti.field(ti.i32, shape=())
+
+        # hot kernels as plain closures: a data_oriented method kernel pays ~40 us of
+        # Python dispatch per launch for its `self` template argument
+        @ti.kernel
+        def detect_all():
+            self._detect_all_body()
+
+        @ti.kernel
+        def resolve_colour_parallel(colour: ti.i32):
+            self.resolve_colour(colour, False)
+
+        @ti.kernel
+        def sweep_serial():
+            self.resolve_colours_serially()
+            self.after_sweep(True)
+
+        @ti.kernel
+        def after_sweep_parallel():
+            self.after_sweep(False)
+
+
+        self.detect_all = detect_all
+        self.resolve_colour_parallel = resolve_colour_parallel
+        self.sweep_serial = sweep_serial
+        self.after_sweep_parallel = after_sweep_parallel
 
     # ---- pair geometry and physics ----
     @ti.func
@@ -138,13 +172,18 @@ class Contacts:
             self.state.v[i] += dvi
             self.state.x[j] += dvj * s
             self.state.v[j] += dvj
-            self.state.modified[i] = 1
-            self.state.modified[j] = 1
+            self.mark_touched(i)
+            self.mark_touched(j)
             self.state.moved[i] += dvi.norm() * s
             self.state.moved[j] += dvj.norm() * s
             ti.atomic_add(self.params.count[PAIRS], 1)
             ti.atomic_max(self.params.vals[VMAX2], ti.max(self.state.v[i].norm_sqr(), self.state.v[j].norm_sqr()))
             ti.atomic_max(self.params.vals[MOVED], ti.max(self.state.moved[i], self.state.moved[j]))
+
+    @ti.func
+    def mark_touched(self, i):
+        if ti.atomic_or(self.state.modified[i], 1) == 0:
+            self.touched[ti.atomic_add(self.n_touched[None], 1)] = i
 
     # ---- detection ----
     @ti.func
@@ -161,24 +200,20 @@ class Contacts:
                 owner = self.grid.linear(self.grid.owner(ci, cj))
                 if ti.atomic_add(self.active[owner], 1) == 0:
                     self.first_pair[owner] = ti.Vector([i, j])
+                    self.active_list[ti.atomic_add(self.n_active[None], 1)] = owner
                 ti.atomic_add(self.params.count[REMAINING], 1)
                 ti.atomic_max(self.params.vals[OPEN_OVERLAP], rel)
             else:
                 ti.atomic_max(self.params.vals[SEP_OVERLAP], rel)
 
-    @ti.kernel
-    def detect_all(self):
+    @ti.func
+    def _detect_all_body(self):
         """Half-stencil scan of every sphere: fills ``active`` and count[REMAINING].
 
         Spheres are visited in cell order; the forward half of the 27-cell stencil is
         walked as 5 rows along z (see grid.FORWARD_ROWS)."""
         self.params.reset_detection()
-        ti.loop_config(serialize=ti.static(self.serial_light))
-        for c in range(self.grid.m):
-            self.active[c] = 0
-        ti.loop_config(serialize=ti.static(self.serial_light))
-        for i in range(self.n):
-            self.state.modified[i] = 0
+        self.clear_active(ti.static(self.serial_light))
         ti.loop_config(serialize=ti.static(self.serial_heavy))
         for p in range(self.n):
             i = self.grid.order[p]
@@ -193,19 +228,28 @@ class Contacts:
                     self.examine(i, self.grid.order[q], ci)
 
     @ti.func
+    def clear_active(self, serial: ti.template()):
+        """Zero the counts of the listed cells (left over when a step hit the sweep
+        limit) and empty the list."""
+        ti.loop_config(serialize=serial)
+        for t in range(self.n_active[None]):
+            self.active[self.active_list[t]] = 0
+        self.n_active[None] = 0
+
+    @ti.func
     def detect_from_modified(self, serial: ti.template()):
         """Full-stencil scan (9 rows along z) from spheres touched in this sweep; a
         pair of two touched spheres is examined once, from the lower id."""
         ti.loop_config(serialize=ti.static(self.serial_heavy or serial))
-        for i in range(self.n):
-            if self.state.modified[i]:
-                ci = self.grid.coords(self.grid.cell_of[i])
-                for k in range(ti.static(len(ALL_ROWS))):
-                    a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
-                    for q in range(a0, b0):
-                        self.examine_if_new(i, self.grid.order[q], ci)
-                    for q in range(a1, b1):
-                        self.examine_if_new(i, self.grid.order[q], ci)
+        for t in range(self.n_touched[None]):
+            i = self.touched[t]
+            ci = self.grid.coords(self.grid.cell_of[i])
+            for k in range(ti.static(len(ALL_ROWS))):
+                a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
+                for q in range(a0, b0):
+                    self.examine_if_new(i, self.grid.order[q], ci)
+                for q in range(a1, b1):
+                    self.examine_if_new(i, self.grid.order[q], ci)
 
     @ti.func
     def examine_if_new(self, i, j, ci):
@@ -214,11 +258,9 @@ class Contacts:
 
     # ---- resolution ----
     @ti.func
-    def resolve_single(self, pair):
-        """Collide the one pair a cell owns, if it still overlaps and approaches (an
-        earlier colour of this sweep may have changed it)."""
-        i = pair[0]
-        j = pair[1]
+    def pair_contact(self, i, j):
+        """Time since contact of (i, j) if they overlap and approach, else -1 [s]."""
+        s = ti.cast(-1, self.real)
         d, sigma = self.separation(i, j)
         dd = d.norm_sqr()
         if dd < sigma * sigma:
@@ -226,89 +268,122 @@ class Contacts:
             du = d.dot(u)
             uu = u.norm_sqr()
             if self.approaching(dd, du, uu):
-                self.collide(i, j, self.time_since_contact(dd, du, uu, sigma))
+                s = self.time_since_contact(dd, du, uu, sigma)
+        return s
 
     @ti.func
-    def resolve_block(self, c, budget):
-        """Collide up to ``budget`` overlapping approaching pairs owned by cell c
-        (vec3), earliest contact first. Touches only spheres in c + {0,1}^3."""
+    def earliest_in_block(self, c):
+        """The overlapping approaching pair owned by cell c (vec3) with the earliest
+        contact (largest s): (i, j, s), or i = -1. Reads only spheres in c + {0,1}^3."""
+        best_s = ti.cast(-1, self.real)
+        bi = -1
+        bj = -1
+        for k in range(ti.static(len(BLOCK_PAIRS))):
+            ca, oka = self.grid.shifted(c, self.block[k, 0])
+            cb, okb = self.grid.shifted(c, self.block[k, 1])
+            if oka and okb:
+                ka = self.grid.linear(ca)
+                kb = self.grid.linear(cb)
+                for pa in range(self.grid.start[ka], self.grid.start[ka + 1]):
+                    i = self.grid.order[pa]
+                    q0 = self.grid.start[kb]
+                    if k == 0:
+                        q0 = pa + 1
+                    for q in range(q0, self.grid.start[kb + 1]):
+                        j = self.grid.order[q]
+                        s = self.pair_contact(i, j)
+                        if s > best_s:
+                            best_s = s
+                            bi = i
+                            bj = j
+        return bi, bj, best_s
+
+    @ti.func
+    def resolve_cell(self, c, k):
+        """Collide the pairs owned by cell c (vec3, linear index k), earliest contact
+        first, as many as the last detection counted there (at most
+        MAX_BLOCK_COLLISIONS). A cell with one pair uses the pair detection recorded
+        (if an earlier colour of this sweep changed it, it is re-checked)."""
+        budget = ti.min(self.active[k], MAX_BLOCK_COLLISIONS)
         for _it in range(budget):
-            best_s = ti.cast(-1, self.real)
             bi = -1
             bj = -1
-            for k in range(ti.static(len(BLOCK_PAIRS))):
-                ca, oka = self.grid.shifted(c, self.block[k, 0])
-                cb, okb = self.grid.shifted(c, self.block[k, 1])
-                if oka and okb:
-                    ka = self.grid.linear(ca)
-                    kb = self.grid.linear(cb)
-                    for pa in range(self.grid.start[ka], self.grid.start[ka + 1]):
-                        i = self.grid.order[pa]
-                        q0 = self.grid.start[kb]
-                        if k == 0:
-                            q0 = pa + 1
-                        for q in range(q0, self.grid.start[kb + 1]):
-                            j = self.grid.order[q]
-                            d, sigma = self.separation(i, j)
-                            dd = d.norm_sqr()
-                            if dd < sigma * sigma:
-                                u = self.rel_velocity(i, j)
-                                du = d.dot(u)
-                                uu = u.norm_sqr()
-                                if self.approaching(dd, du, uu):
-                                    s = self.time_since_contact(dd, du, uu, sigma)
-                                    if s > best_s:
-                                        best_s = s
-                                        bi = i
-                                        bj = j
+            s = ti.cast(-1, self.real)
+            if budget == 1:
+                bi = self.first_pair[k][0]
+                bj = self.first_pair[k][1]
+                s = self.pair_contact(bi, bj)
+                if s < 0:
+                    bi = -1
+            else:
+                bi, bj, s = self.earliest_in_block(c)
             if bi < 0:
                 break
-            self.collide(bi, bj, best_s)
+            self.collide(bi, bj, s)
+        self.active[k] = 0
 
     @ti.func
-    def resolve_colour(self, colour: ti.template(), serial: ti.template()):
-        """One parallel pass over the owner cells of one colour, whose blocks are
-        disjoint; colour = ((start, stride, count) per axis)."""
+    def colour_index(self, c):
+        """Colour of cell c (vec3): parity per axis, 2 for the last cell of an odd
+        periodic axis; numbered like GridGeometry.colours."""
+        idx = 0
+        for a in ti.static(range(3)):
+            ia = c[a] % 2
+            if ti.static(self.grid.geom.periodic[a] and self.grid.geom.dims[a] % 2 == 1):
+                if c[a] == ti.static(self.grid.geom.dims[a] - 1):
+                    ia = 2
+            idx = idx * ti.static(self.axis_colours[a]) + ia
+        return idx
+
+    @ti.func
+    def resolve_listed(self, t, colour):
+        k = self.active_list[t]
+        c = self.grid.coords(k)
+        if self.colour_index(c) == colour and self.active[k] > 0:
+            self.resolve_cell(c, k)
+
+    @ti.func
+    def resolve_colour(self, colour, serial: ti.template()):
+        """One parallel pass over the listed cells of one colour; their blocks are
+        disjoint, so no two threads touch one sphere."""
         ti.loop_config(serialize=ti.static(self.serial_heavy or serial))
-        for I in ti.grouped(ti.ndrange(colour[0][2], colour[1][2], colour[2][2])):
-            c = ti.Vector([colour[0][0] + colour[0][1] * I[0], colour[1][0] + colour[1][1] * I[1],
-                           colour[2][0] + colour[2][1] * I[2]])
-            k = self.grid.linear(c)
-            budget = self.active[k]
-            if budget == 1:
-                self.resolve_single(self.first_pair[k])
-                self.active[k] = 0
-            elif budget > 1:
-                self.resolve_block(c, ti.min(budget, MAX_BLOCK_COLLISIONS))
-                self.active[k] = 0
+        for t in range(self.n_active[None]):
+            self.resolve_listed(t, colour)
 
-    @ti.kernel
-    def resolve_colours(self, serial: ti.template()):
-        """Every colour in turn, each a parallel loop (one launch for all)."""
-        for k in ti.static(range(len(self.colours))):
-            self.resolve_colour(self.colours[k], serial)
+    @ti.func
+    def resolve_colours_serially(self):
+        """The colours one after another in one serial loop (one launch): for small
+        systems on the CPU, where a launch per colour costs more than the work."""
+        ti.loop_config(serialize=True)
+        for colour in range(ti.static(len(self.colours))):
+            for t in range(self.n_active[None]):
+                self.resolve_listed(t, colour)
 
-    @ti.kernel
+    @ti.func
     def after_sweep(self, serial: ti.template()):
         """Put the spheres a sweep touched back inside the box, detect new approaching
         overlaps around them, and clear their marks."""
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
-        for i in range(self.n):
-            if self.state.modified[i]:
-                self.motion.walls_and_wrap(i)
+        for t in range(self.n_touched[None]):
+            self.motion.walls_and_wrap(self.touched[t])
         self.params.reset_detection()
+        self.clear_active(ti.static(self.serial_light or serial))
         self.detect_from_modified(serial)
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
-        for i in range(self.n):
-            self.state.modified[i] = 0
+        for t in range(self.n_touched[None]):
+            self.state.modified[self.touched[t]] = 0
+        self.n_touched[None] = 0
 
     def sweep(self, pending):
         """Resolve every colour in turn, then :meth:`after_sweep`. With few pending
         pairs on the CPU the loops run serially: a parallel launch there costs more
         than the work (a second compiled variant, built on first use)."""
-        serial = bool(self.serial_few and pending <= FEW_PAIRS)
-        self.resolve_colours(serial)
-        self.after_sweep(serial)
+        if self.serial_heavy or (self.serial_few and pending <= FEW_PAIRS):
+            self.sweep_serial()
+        else:
+            for k in range(len(self.colours)):
+                self.resolve_colour_parallel(k)
+            self.after_sweep_parallel()
 
     # ---- debugging / tests ----
     @ti.kernel
