@@ -16,6 +16,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
+	sh tools/ensure_vulkan.sh
 	mkdir -p out
 	$(BIN)/taichi-spheres run scenes/seed_five.toml -o out/seed_five.mp4 --arch $(ARCH)
 

@@ -175,7 +175,10 @@ def cmd_run(scene: Scene, args):
     duration = args.duration or run.get("duration", DEFAULT_DURATION)
     fps = args.fps or run.get("fps", DEFAULT_FPS)
     size = args.size or (render.get("width", DEFAULT_SIZE[0]), render.get("height", DEFAULT_SIZE[1]))
-    video_path = args.output
+    output = scene.meta.get("output", {})
+    video_path = args.output or output.get("video")
+    args.npz = args.npz or output.get("snapshots", False)
+    args.checkpoint_every = args.checkpoint_every or output.get("checkpoint_every")
     if video_path is None:
         video_path = os.path.join("out", f"{scene.name}.mp4")
         os.makedirs("out", exist_ok=True)

@@ -6,13 +6,18 @@ Units are SI, z is up. See README "Scene files" for every key and its default.
 
     name = "seed_five"
     [box]      lo, hi (3 numbers, m), periodic (3 bools), wall_restitution
-    [physics]  gravity (m/s^2), restitution, step_fraction, max_sweeps, precision
+    [physics]  gravity (m/s^2, default none: not compiled in), restitution,
+               step_fraction, max_sweeps, precision
     [run]      duration (s), fps
+    [render]   width, height (multiples of 16), camera_position, camera_lookat, fov,
+               colours ("group" | "speed"), background
+    [output]   video (path, .mp4), snapshots (bool: .npz), checkpoint_every (frames)
     [[spheres]]  one sphere: x, v, radius, and mass or density
     [[lattice]]  a simple-cubic block: lo, hi, spacing, radius, mass|density,
                  v (velocity of all) or speed (random directions), seed
     [[random]]   count spheres at random non-overlapping places in a region
-                 (lo, hi), radius, mass|density, v | speed, seed
+                 (lo, hi), radius (radius_spread p: uniform in radius * [1-p, 1]),
+                 mass|density, v | speed, seed
 """
 from __future__ import annotations
 
@@ -31,7 +36,7 @@ from .scene import DEFAULT_DENSITY, Scene
 
 __all__ = ["load_scene", "scene_from_dict", "SceneFileError"]
 
-_TOP = {"name": str, "box": dict, "physics": dict, "run": dict, "render": dict,
+_TOP = {"name": str, "box": dict, "physics": dict, "run": dict, "render": dict, "output": dict,
         "spheres": list, "lattice": list, "random": list}
 _RENDER = {"width": int, "height": int, "camera_position": "vec3", "camera_lookat": "vec3",
            "fov": float, "colours": str, "background": "vec3"}
@@ -39,12 +44,13 @@ _BOX = {"lo": "vec3", "hi": "vec3", "periodic": "bool3", "wall_restitution": flo
 _PHYSICS = {"gravity": "vec3", "restitution": float, "step_fraction": float,
             "max_sweeps": int, "precision": str}
 _RUN = {"duration": float, "fps": float}
+_OUTPUT = {"video": str, "snapshots": bool, "checkpoint_every": int}
 _SPHERE = {"colour": "vec3", "x": "vec3", "v": "vec3", "radius": float, "mass": float,
            "density": float}
 _LATTICE = {"colour": "vec3", "lo": "vec3", "hi": "vec3", "spacing": float, "radius": float,
             "mass": float,
             "density": float, "v": "vec3", "speed": float, "seed": int}
-_RANDOM = {"colour": "vec3", "count": int, "lo": "vec3", "hi": "vec3", "radius": float,
+_RANDOM = {"colour": "vec3", "radius_spread": float, "count": int, "lo": "vec3", "hi": "vec3", "radius": float,
            "mass": float,
            "density": float, "v": "vec3", "speed": float, "seed": int}
 
@@ -84,6 +90,12 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
     physics = _table(data, "physics", _PHYSICS, problems)
     run = _table(data, "run", _RUN, problems)
     render = _table(data, "render", _RENDER, problems)
+    output = _table(data, "output", _OUTPUT, problems)
+    if "video" in output and isinstance(output["video"], str) and \
+            not output["video"].lower().endswith(".mp4"):
+        problems.append(f"output.video: must end in .mp4, got {output['video']!r}")
+    if isinstance(output.get("checkpoint_every"), int) and output["checkpoint_every"] < 1:
+        problems.append(f"output.checkpoint_every: must be >= 1 frame, got {output['checkpoint_every']}")
     _check_render(render, run, problems)
     groups = []
     for key, schema in (("spheres", _SPHERE), ("lattice", _LATTICE), ("random", _RANDOM)):
@@ -120,7 +132,7 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
             np.concatenate(arrays["x"]), np.concatenate(arrays["v"]),
             np.concatenate(arrays["radius"]), mass=np.concatenate(arrays["mass"]),
             box=(lo, hi), periodic=box.get("periodic", [False, False, False]),
-            gravity=physics.get("gravity", [0.0, 0.0, -9.81]),
+            gravity=physics.get("gravity", [0.0, 0.0, 0.0]),
             restitution=physics.get("restitution", 1.0),
             wall_restitution=box.get("wall_restitution", 1.0),
             name=data.get("name", "scene"))
@@ -128,7 +140,8 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
         raise SceneFileError(source, [str(exc) + _origins(str(exc), groups, arrays)]) from None
     colours = np.array([item.get("colour", [-1.0, -1.0, -1.0]) for _, _, item in groups],
                        dtype=np.float64)
-    meta = {"run": run, "physics": physics, "render": render, "source": source,
+    meta = {"run": run, "physics": physics, "render": render, "output": output,
+            "source": source,
             "groups": np.concatenate(arrays["group"]), "group_colours": colours}
     return dataclasses.replace(scene, meta=meta)
 
@@ -340,10 +353,15 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=Fals
             raise ValueError("count must be >= 1")
         lo = np.asarray(item.get("lo", box_lo), dtype=np.float64)
         hi = np.asarray(item.get("hi", box_hi), dtype=np.float64)
-        x = random_positions(count, float(item["radius"]), lo, hi, rng,
+        spread = float(item.get("radius_spread", 0.0))
+        if not 0.0 <= spread < 1.0:
+            raise ValueError(f"radius_spread must be in [0, 1), got {spread}")
+        radius = float(item["radius"]) * (1.0 - spread * rng.random(count))
+        x = random_positions(count, radius, lo, hi, rng,
                              existing=(arrays["x"], arrays["radius"]),
                              box=(box_lo, box_hi), periodic=periodic)
-    radius = np.full(count, float(item["radius"]))
+    if kind != "random":
+        radius = np.full(count, float(item["radius"]))
     arrays["x"].append(x)
     arrays["v"].append(_velocities(item, count, rng))
     arrays["radius"].append(radius)
@@ -353,8 +371,9 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=Fals
 
 def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=200,
                      box=None, periodic=False):
-    """count non-overlapping centres of spheres of one radius inside [lo, hi]
-    (random sequential addition on a hash grid; raises if the region is too full).
+    """count non-overlapping centres of spheres inside [lo, hi]; radius is one number
+    or one per sphere (random sequential addition on a hash grid, largest first is
+    not needed: raises if the region is too full).
 
     box: (lo, hi) of the simulation box and periodic: bool or 3 bools; on periodic
     axes spheres near one face are also kept clear of the images of spheres near the
@@ -366,13 +385,12 @@ def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=20
     else:
         box_lo = np.asarray(box[0], dtype=np.float64)
         box_hi = np.asarray(box[1], dtype=np.float64)
-    lo = lo + radius
-    hi = hi - radius
-    if np.any(hi < lo):
+    radii = np.broadcast_to(np.asarray(radius, dtype=np.float64), (count,))
+    if np.any(hi - lo < 2.0 * radii.max()):
         raise ValueError("region too small for one sphere")
     prev_x = np.concatenate(list(existing[0])) if len(existing[0]) else np.zeros((0, 3))
     prev_r = np.concatenate(list(existing[1])) if len(existing[1]) else np.zeros(0)
-    cell = 2.0 * max(radius, prev_r.max() if prev_r.size else 0.0)
+    cell = 2.0 * max(radii.max(), prev_r.max() if prev_r.size else 0.0)
     buckets: dict = {}
 
     def key(p):
@@ -402,8 +420,9 @@ def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=20
         add(p, r)
     out = np.empty((count, 3))
     for k in range(count):
+        radius = radii[k]
         for _ in range(max_tries):
-            p = lo + rng.random(3) * (hi - lo)
+            p = lo + radius + rng.random(3) * (hi - lo - 2.0 * radius)
             c = key(p)
             ok = True
             for dx in (-1, 0, 1):

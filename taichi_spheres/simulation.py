@@ -50,12 +50,15 @@ class Simulation:
     arch: 'cpu' | 'gpu' | 'cuda' | 'vulkan' | 'metal'. precision: 'f64' (default on
     cpu/cuda) or 'f32' (default on vulkan/metal). step_fraction: largest move per
     step / smallest radius, in (0, 1]. max_sweeps: detect/resolve sweeps per step.
-    threads: CPU threads (None: Taichi's default).
+    threads: CPU threads (None: Taichi's default). compile_all: compile every
+    optional feature in even when the scene does not need it (same results; for
+    measuring what compiling them out saves).
     """
 
     def __init__(self, scene: Scene, arch: str = "cpu", precision: str | None = None,
                  step_fraction: float = DEFAULT_STEP_FRACTION,
-                 max_sweeps: int = DEFAULT_MAX_SWEEPS, threads: int | None = None):
+                 max_sweeps: int = DEFAULT_MAX_SWEEPS, threads: int | None = None,
+                 compile_all: bool = False):
         if not isinstance(scene, Scene):
             raise ValueError(f"scene must be a taichi_spheres.Scene, got {type(scene).__name__}")
         step_fraction = float(step_fraction)
@@ -67,6 +70,10 @@ class Simulation:
         self.step_fraction = step_fraction
         self.max_sweeps = max_sweeps
         self.features = Features.from_scene(scene)
+        if compile_all:
+            self.features = Features(gravity_axes=(True, True, True),
+                                     wall_axes=self.features.wall_axes, equal_radii=False,
+                                     equal_masses=False, elastic=False, elastic_walls=False)
         self.geometry = GridGeometry.for_box(
             scene.box_lo, scene.box_hi, scene.periodic, float(scene.radius.max()),
             float(scene.radius.min()), scene.n, step_fraction)

@@ -142,7 +142,10 @@ class Motion:
                         if not bounced and bounce < MAX_WALL_BOUNCES:
                             # past the wall without a crossing on its current path: a
                             # pair collision carried it there, or it rests on the wall
-                            if ti.static(not self.f.gravity_axes[a]):
+                            mirror = True
+                            if ti.static(self.f.gravity_axes[a]):
+                                mirror = acc == 0
+                            if mirror:
                                 # mirror into the box and reflect (energy exact for e=1)
                                 wn = w
                                 if w < 0:
