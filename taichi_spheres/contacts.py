@@ -23,12 +23,11 @@ next sweep.
 import numpy as np
 import taichi as ti
 
-from .grid import ALL_ROWS, BLOCK_PAIRS, FORWARD_OFFSETS, FORWARD_ROWS, Grid
+from .grid import ALL_ROWS, BLOCK_PAIRS, FORWARD_ROWS, Grid
 from .params import MOVED, OPEN_OVERLAP, PAIRS, REMAINING, SEP_OVERLAP, VMAX2, StepParams
 from .state import Features, SphereState
 from .walls import Motion
 
-STENCIL = FORWARD_OFFSETS + tuple(tuple(-c for c in o) for o in FORWARD_OFFSETS[1:])
 
 #: Below this many pending pairs a CPU sweep runs its loops serially.
 FEW_PAIRS = 1000
@@ -68,9 +67,7 @@ class Contacts:
         # the pair that made a cell active; used directly when it is the only one
         self.first_pair = ti.Vector.field(2, ti.i32, shape=grid.m)
         # stencils as small tables walked by runtime loops (unrolling them multiplies
-        # compile time); STENCIL = (0,0,0), 13 forward offsets, then their negatives
-        self.stencil = ti.Vector.field(3, ti.i32, shape=len(STENCIL))
-        self.stencil.from_numpy(np.array(STENCIL, dtype=np.int32))
+        # compile time)
         self.fwd_rows = ti.Vector.field(4, ti.i32, shape=len(FORWARD_ROWS))
         self.fwd_rows.from_numpy(np.array(FORWARD_ROWS, dtype=np.int32))
         self.all_rows = ti.Vector.field(4, ti.i32, shape=len(ALL_ROWS))
@@ -86,6 +83,7 @@ class Contacts:
         self.n_active = ti.field(ti.i32, shape=())
         self.touched = ti.field(ti.i32, shape=self.n)
         self.n_touched = ti.field(ti.i32, shape=())
+        self.debug_pairs = None     # allocated by list_overlaps (tests only)
 
         # hot kernels as plain closures: a data_oriented method kernel pays ~40 us of
         # Python dispatch per launch for its `self` template argument
@@ -187,12 +185,20 @@ class Contacts:
 
     # ---- detection ----
     @ti.func
-    def examine(self, i, j, ci):
+    def examine(self, i, j, ci, record: ti.template()):
         """Classify pair (i, j), i in cell ci (vec3): an approaching overlap is counted
-        for its owner cell; a separating overlap only updates the max overlap."""
+        for its owner cell; a separating overlap only updates the max overlap.
+        record=True (tests): only append approaching overlaps to the debug list."""
         d, sigma = self.separation(i, j)
         dd = d.norm_sqr()
-        if dd < sigma * sigma:
+        if ti.static(record):
+            if dd < sigma * sigma:
+                u = self.rel_velocity(i, j)
+                if self.approaching(dd, d.dot(u), u.norm_sqr()):
+                    slot = ti.atomic_add(self.debug_count[None], 1)
+                    if slot < self.debug_pairs.shape[0]:
+                        self.debug_pairs[slot] = ti.Vector([ti.min(i, j), ti.max(i, j)])
+        elif dd < sigma * sigma:
             u = self.rel_velocity(i, j)
             rel = 1 - ti.sqrt(dd) / sigma
             if self.approaching(dd, d.dot(u), u.norm_sqr()):
@@ -208,12 +214,15 @@ class Contacts:
 
     @ti.func
     def _detect_all_body(self):
-        """Half-stencil scan of every sphere: fills ``active`` and count[REMAINING].
-
-        Spheres are visited in cell order; the forward half of the 27-cell stencil is
-        walked as 5 rows along z (see grid.FORWARD_ROWS)."""
+        """Half-stencil scan of every sphere: fills ``active`` and count[REMAINING]."""
         self.params.reset_detection()
         self.clear_active(ti.static(self.serial_light))
+        self.scan_forward(False)
+
+    @ti.func
+    def scan_forward(self, record: ti.template()):
+        """Examine every pair once: spheres in cell order, the forward half of the
+        27-cell stencil walked as 5 rows along z (see grid.FORWARD_ROWS)."""
         ti.loop_config(serialize=ti.static(self.serial_heavy))
         for p in range(self.n):
             i = self.grid.order[p]
@@ -223,9 +232,9 @@ class Contacts:
                 if k == 0:
                     a0 = p + 1   # same cell: only spheres after i (ids sorted in a cell)
                 for q in range(a0, b0):
-                    self.examine(i, self.grid.order[q], ci)
+                    self.examine(i, self.grid.order[q], ci, record)
                 for q in range(a1, b1):
-                    self.examine(i, self.grid.order[q], ci)
+                    self.examine(i, self.grid.order[q], ci, record)
 
     @ti.func
     def clear_active(self, serial: ti.template()):
@@ -254,7 +263,7 @@ class Contacts:
     @ti.func
     def examine_if_new(self, i, j, ci):
         if j != i and (self.state.modified[j] == 0 or j > i):
-            self.examine(i, j, ci)
+            self.examine(i, j, ci, False)
 
     # ---- resolution ----
     @ti.func
@@ -386,37 +395,24 @@ class Contacts:
             self.after_sweep_parallel()
 
     # ---- debugging / tests ----
-    @ti.kernel
-    def _list_overlaps(self, out: ti.types.ndarray(), counter: ti.types.ndarray()):
-        """All overlapping approaching pairs (i < j) found with the grid, into out."""
-        for i in range(self.n):
-            ci = self.grid.coords(self.grid.cell_of[i])
-            for k in range(ti.static(len(FORWARD_OFFSETS))):
-                cj, ok = self.grid.shifted(ci, self.stencil[k])
-                if ok:
-                    kj = self.grid.linear(cj)
-                    for q in range(self.grid.start[kj], self.grid.start[kj + 1]):
-                        j = self.grid.order[q]
-                        if k > 0 or j > i:
-                            d, sigma = self.separation(i, j)
-                            u = self.rel_velocity(i, j)
-                            dd = d.norm_sqr()
-                            if dd < sigma * sigma and self.approaching(dd, d.dot(u), u.norm_sqr()):
-                                slot = ti.atomic_add(counter[0], 1)
-                                if slot < out.shape[0]:
-                                    out[slot, 0] = ti.min(i, j)
-                                    out[slot, 1] = ti.max(i, j)
+    def list_overlaps(self):
+        """Sorted (K, 2) int array of the overlapping approaching pairs that the
+        detection scan finds (same code path as detect_all, recording instead)."""
+        if self.debug_pairs is None:
+            self.debug_pairs = ti.Vector.field(2, ti.i32, shape=8 * self.n + 16)
+            self.debug_count = ti.field(ti.i32, shape=())
 
-    def list_overlaps(self, capacity=None):
-        """Sorted (K, 2) int array of overlapping approaching pairs seen by the grid."""
-        capacity = capacity or 8 * self.n + 16
-        out = np.zeros((capacity, 2), dtype=np.int32)
-        counter = np.zeros(1, dtype=np.int32)
-        self._list_overlaps(out, counter)
-        k = int(counter[0])
-        if k > capacity:
-            return self.list_overlaps(k)
-        pairs = out[:k]
+            @ti.kernel
+            def record():
+                self.debug_count[None] = 0
+                self.scan_forward(True)
+
+            self._record = record
+        self._record()
+        k = int(self.debug_count[None])
+        if k > self.debug_pairs.shape[0]:
+            raise RuntimeError(f"{k} overlapping pairs: more than the debug list holds")
+        pairs = self.debug_pairs.to_numpy()[:k]
         return pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]
 
     @ti.kernel
