@@ -15,6 +15,8 @@ Units are SI, z is up. See README "Scene files" for every key and its default.
     [[spheres]]  one sphere: x, v, radius, and mass or density
     [[lattice]]  a simple-cubic block: lo, hi, spacing, radius, mass|density,
                  v (velocity of all) or speed (random directions), seed
+    [[pour]]     count spheres on a jittered lattice filling a region (lo, hi) from
+                 its top down, radius, mass|density, v, v_spread, seed: a pour
     [[random]]   count spheres at random non-overlapping places in a region
                  (lo, hi), radius (radius_spread p: uniform in radius * [1-p, 1]),
                  mass|density, v | speed, seed
@@ -37,7 +39,7 @@ from .scene import DEFAULT_DENSITY, Scene
 __all__ = ["load_scene", "scene_from_dict", "SceneFileError"]
 
 _TOP = {"name": str, "box": dict, "physics": dict, "run": dict, "render": dict, "output": dict,
-        "spheres": list, "lattice": list, "random": list}
+        "spheres": list, "lattice": list, "random": list, "pour": list}
 _RENDER = {"width": int, "height": int, "camera_position": "vec3", "camera_lookat": "vec3",
            "fov": float, "colours": str, "background": "vec3"}
 _BOX = {"lo": "vec3", "hi": "vec3", "periodic": "bool3", "wall_restitution": float}
@@ -47,10 +49,12 @@ _RUN = {"duration": float, "fps": float}
 _OUTPUT = {"video": str, "snapshots": bool, "checkpoint_every": int}
 _SPHERE = {"colour": "vec3", "x": "vec3", "v": "vec3", "radius": float, "mass": float,
            "density": float}
-_LATTICE = {"colour": "vec3", "lo": "vec3", "hi": "vec3", "spacing": float, "radius": float,
+_LATTICE = {"colour": "vec3", "v_spread": float, "lo": "vec3", "hi": "vec3", "spacing": float, "radius": float,
             "mass": float,
             "density": float, "v": "vec3", "speed": float, "seed": int}
-_RANDOM = {"colour": "vec3", "radius_spread": float, "count": int, "lo": "vec3", "hi": "vec3", "radius": float,
+_POUR = {"colour": "vec3", "count": int, "lo": "vec3", "hi": "vec3", "radius": float,
+         "mass": float, "density": float, "v": "vec3", "v_spread": float, "seed": int}
+_RANDOM = {"colour": "vec3", "radius_spread": float, "v_spread": float, "count": int, "lo": "vec3", "hi": "vec3", "radius": float,
            "mass": float,
            "density": float, "v": "vec3", "speed": float, "seed": int}
 
@@ -98,7 +102,8 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
         problems.append(f"output.checkpoint_every: must be >= 1 frame, got {output['checkpoint_every']}")
     _check_render(render, run, problems)
     groups = []
-    for key, schema in (("spheres", _SPHERE), ("lattice", _LATTICE), ("random", _RANDOM)):
+    for key, schema in (("spheres", _SPHERE), ("lattice", _LATTICE), ("random", _RANDOM),
+                        ("pour", _POUR)):
         items = data.get(key, [])
         if not isinstance(items, list):
             continue
@@ -116,7 +121,7 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
         problems.append(f"physics.precision: must be \"f32\" or \"f64\", got {physics['precision']!r}")
     _check_values(box, physics, problems)
     if not groups and not problems:
-        problems.append("no spheres: add [[spheres]], [[lattice]] or [[random]] tables")
+        problems.append("no spheres: add [[spheres]], [[lattice]], [[random]] or [[pour]] tables")
     arrays = {"x": [], "v": [], "radius": [], "mass": [], "group": []}
     if not problems:
         for kind, where, item in groups:
@@ -195,7 +200,8 @@ def _nested_match(key):
     return names[near[0]] if near else None
 
 
-_REQUIRED = {"spheres": ("x", "radius"), "lattice": ("radius",), "random": ("count", "radius")}
+_REQUIRED = {"spheres": ("x", "radius"), "lattice": ("radius",), "random": ("count", "radius"),
+             "pour": ("count", "radius")}
 
 
 def _valid(table, key, schema):
@@ -217,7 +223,7 @@ def _check_group(kind, where, item, schema, problems):
         value = _valid(item, key, schema) if key in schema else None
         if value is not None and not value > 0:
             problems.append(f"{where}.{key}: must be > 0, got {value!r}")
-    for key, least in (("speed", 0), ("seed", 0), ("count", 1)):
+    for key, least in (("speed", 0), ("seed", 0), ("count", 1), ("v_spread", 0)):
         value = _valid(item, key, schema) if key in schema else None
         if value is not None and not value >= least:
             problems.append(f"{where}.{key}: must be >= {least}, got {value!r}")
@@ -309,13 +315,39 @@ def _mass_of(item, radius, where, count):
 
 
 def _velocities(item, count, rng):
+    """v (all the same), or speed (that magnitude in random directions), plus a
+    Gaussian of rms v_spread per component [m/s]."""
     if "v" in item and "speed" in item:
         raise ValueError("give v or speed, not both")
     if "speed" in item:
         d = rng.normal(size=(count, 3))
         d /= np.linalg.norm(d, axis=1, keepdims=True)
-        return float(item["speed"]) * d
-    return np.tile(np.asarray(item.get("v", [0.0, 0.0, 0.0]), dtype=np.float64), (count, 1))
+        out = float(item["speed"]) * d
+    else:
+        out = np.tile(np.asarray(item.get("v", [0.0, 0.0, 0.0]), dtype=np.float64), (count, 1))
+    spread = float(item.get("v_spread", 0.0))
+    if spread:
+        out = out + rng.normal(scale=spread, size=(count, 3))
+    return out
+
+
+def pour_positions(count, radius, lo, hi, rng):
+    """A pour: ``count`` spheres on a jittered lattice (spacing 2.5 r) filling the region
+    [lo, hi] from the top down, as grains leaving a hopper; raises if it is too small."""
+    spacing = 2.5 * radius
+    axes = [np.arange(lo[a] + radius, hi[a] - radius + 1e-12, spacing) for a in range(3)]
+    if any(len(ax) == 0 for ax in axes):
+        raise ValueError("region too small for one sphere")
+    per_layer = len(axes[0]) * len(axes[1])
+    layers = -(-count // per_layer)
+    if layers > len(axes[2]):
+        raise ValueError(f"region holds {per_layer * len(axes[2])} spheres at spacing "
+                         f"{spacing:g} m, not {count}: make it taller")
+    z = axes[2][::-1][:layers]
+    grid = np.stack(np.meshgrid(axes[0], axes[1], z, indexing="ij"), -1)
+    sites = grid.transpose(2, 0, 1, 3).reshape(-1, 3)[:count]     # top layer first
+    jitter = 0.5 * (spacing - 2 * radius) * (2 * rng.random((count, 3)) - 1)
+    return np.clip(sites + jitter, lo + radius, hi - radius)
 
 
 def _need(item, keys, where):
@@ -346,6 +378,12 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=Fals
             raise ValueError("region too small for one sphere")
         x = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
         count = len(x)
+    elif kind == "pour":
+        _need(item, ("count", "radius"), where)
+        count = int(item["count"])
+        lo = np.asarray(item.get("lo", box_lo), dtype=np.float64)
+        hi = np.asarray(item.get("hi", box_hi), dtype=np.float64)
+        x = pour_positions(count, float(item["radius"]), lo, hi, rng)
     else:
         _need(item, ("count", "radius"), where)
         count = int(item["count"])

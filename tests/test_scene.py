@@ -535,7 +535,7 @@ def test_good_scene_file(tmp_path):
 def test_unknown_top_level_key(tmp_path):
     problems, msg = load_problems(tmp_path, 'bogus = 1\n' + GOOD)
     assert problems == ["unknown key 'bogus' (valid: box, lattice, name, output, physics, "
-                        "random, render, run, spheres)"]
+                        "pour, random, render, run, spheres)"]
 
 
 def test_misspelt_top_level_key_gets_suggestion(tmp_path):
@@ -671,7 +671,7 @@ def test_value_ranges_reported_together(tmp_path):
 
 def test_no_spheres(tmp_path):
     problems, _ = load_problems(tmp_path, "[box]\nhi = [1.0, 1.0, 1.0]\n")
-    assert problems == ["no spheres: add [[spheres]], [[lattice]] or [[random]] tables"]
+    assert problems == ["no spheres: add [[spheres]], [[lattice]], [[random]] or [[pour]] tables"]
 
 
 def test_overlapping_explicit_spheres_name_both_indices(tmp_path):
@@ -854,3 +854,36 @@ def test_scene_from_dict_matches_file(tmp_path):
     s2 = scene_from_dict(tomllib.loads(GOOD))
     np.testing.assert_array_equal(s1.x, s2.x)
     np.testing.assert_array_equal(s1.mass, s2.mass)
+
+
+def test_pour_generator_fills_from_the_top(tmp_path):
+    text = ('[physics]\ngravity = [0.0, 0.0, -9.81]\n[[pour]]\ncount = 50\nradius = 0.02\n'
+            'lo = [0.1, 0.1, 0.5]\nhi = [0.9, 0.9, 1.0]\nv = [0.0, 0.0, -1.0]\nv_spread = 0.1\n'
+            'seed = 1\n')
+    p = tmp_path / "pour.toml"
+    p.write_text(text)
+    scene = ts.load_scene(str(p))
+    assert scene.n == 50
+    assert scene.x[:, 2].min() > 0.5 + 0.02 - 1e-12 and scene.x[:, 2].max() <= 1.0 - 0.02
+    # the top layer is filled first: every sphere is within two layers of the top
+    assert scene.x[:, 2].min() > 1.0 - 0.02 - 2 * 2.5 * 0.02 - 0.02
+    assert abs(scene.v[:, 2].mean() + 1.0) < 0.1 and scene.v[:, 0].std() > 0
+    again = ts.load_scene(str(p))
+    np.testing.assert_array_equal(scene.x, again.x)
+
+
+def test_pour_too_many_for_the_region(tmp_path):
+    p = tmp_path / "pour.toml"
+    p.write_text('[[pour]]\ncount = 100000\nradius = 0.05\nlo = [0, 0, 0.8]\nhi = [1, 1, 1]\n')
+    with pytest.raises(ValueError, match="make it taller"):
+        ts.load_scene(str(p))
+
+
+def test_radius_spread_gives_polydisperse_random_group(tmp_path):
+    p = tmp_path / "poly.toml"
+    p.write_text('[[random]]\ncount = 200\nradius = 0.03\nradius_spread = 0.5\nseed = 2\n')
+    scene = ts.load_scene(str(p))
+    assert scene.radius.min() >= 0.015 and scene.radius.max() <= 0.03
+    assert scene.radius.max() / scene.radius.min() > 1.5
+    # masses follow the radii through the (default) density
+    np.testing.assert_allclose(scene.mass, 1000.0 * 4 / 3 * np.pi * scene.radius ** 3)
