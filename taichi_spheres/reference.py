@@ -388,20 +388,28 @@ def _first_contact_quartic(d, u, a, sigma, just_collided=False):
     t_far = (un + math.sqrt(un * un + 2.0 * an * (dn + sigma))) / an
     scale = sigma / (un + math.sqrt(an * sigma))
     t_start = 1e-9 * scale if just_collided else 0.0
-    if not just_collided and f(0.0) <= 0.0 and c1 < 0.0:
+    f0 = f(0.0)
+    if not just_collided and f0 <= 0.0 and c1 < 0.0:
         return 0.0
+    # touching within round-off (f0 <= 0) but separating: the distance at t = 0
+    # counts as contact, the next contact is where it comes back to it
+    shift = min(f0, 0.0)
+
+    def fs(t):
+        return f(t) - shift
+
     crit = np.roots([4.0 * c4, 3.0 * c3, 2.0 * c2, c1]).real
     pts = [t_start] + sorted(float(c) for c in crit if t_start < c < t_far) + [t_far]
-    for lo, hi in zip(pts[:-1], pts[1:]):
-        flo, fhi = f(lo), f(hi)
-        if flo > 0.0 and fhi <= 0.0:
+    for k, (lo, hi) in enumerate(zip(pts[:-1], pts[1:])):
+        flo, fhi = fs(lo), fs(hi)
+        if (flo > 0.0 or (k == 0 and flo >= 0.0)) and fhi <= 0.0:
             for _ in range(200):
                 mid = 0.5 * (lo + hi)
                 if not lo < mid < hi:
                     break
-                if f(mid) > 0.0:
+                if fs(mid) > 0.0:
                     lo = mid
                 else:
                     hi = mid
-            return hi if abs(f(hi)) <= abs(f(lo)) else lo
+            return hi if abs(fs(hi)) <= abs(fs(lo)) else lo
     return _INF
