@@ -64,6 +64,8 @@ class Contacts:
         self.serial_heavy = serial_heavy
         # only worth a second compiled variant where the loops are otherwise parallel
         self.serial_few = serial_few and not serial_heavy
+        # the box size is baked into the kernels (each Simulation compiles its own)
+        self.box_size = tuple(float(hi - lo) for lo, hi in zip(state.box_lo, state.box_hi))
         eps = float(np.finfo(np.float64 if self.real == ti.f64 else np.float32).eps)
         self.approach_eps = 8.0 * eps
         self.active = ti.field(ti.i32, shape=grid.m)
@@ -123,12 +125,17 @@ class Contacts:
     def separation(self, i, j):
         """d = x_i - x_j (minimum image on periodic axes) [m] and sigma = r_i + r_j [m].
         Velocities are loaded separately, only for overlapping pairs."""
-        d = self.state.x[i] - self.state.x[j]
+        return self.separation_from(self.state.x[i], i, j)
+
+    @ti.func
+    def separation_from(self, xi, i, j):
+        """separation(i, j) with x_i already loaded (hot loops load it once per sphere)."""
+        d = xi - self.state.x[j]
         for a in ti.static(range(3)):
             if ti.static(not self.f.wall_axes[a]):
                 # positions stay within about one box length of each other, so one
                 # compare-and-shift is the minimum image (no division in the hot loop)
-                size = self.params.size[None][a]
+                size = ti.cast(ti.static(self.box_size[a]), self.real)
                 if d[a] > 0.5 * size:
                     d[a] -= size
                 elif d[a] < -0.5 * size:
@@ -193,11 +200,11 @@ class Contacts:
 
     # ---- detection ----
     @ti.func
-    def examine(self, i, j, ci, record: ti.template()):
-        """Classify pair (i, j), i in cell ci (vec3): an approaching overlap is counted
-        for its owner cell; a separating overlap only updates the max overlap.
+    def examine(self, xi, i, j, ci, record: ti.template()):
+        """Classify pair (i, j), i at xi in cell ci (vec3): an approaching overlap is
+        counted for its owner cell; a separating overlap only updates the max overlap.
         record=True (tests): only append approaching overlaps to the debug list."""
-        d, sigma = self.separation(i, j)
+        d, sigma = self.separation_from(xi, i, j)
         dd = d.norm_sqr()
         if ti.static(record):
             if dd < sigma * sigma:
@@ -235,14 +242,15 @@ class Contacts:
         for p in range(self.n):
             i = self.grid.order[p]
             ci = self.grid.coords(self.grid.cell_of[i])
+            xi = self.state.x[i]
             for k in range(ti.static(len(FORWARD_ROWS))):
                 a0, b0, a1, b1 = self.grid.row_ranges(ci, self.fwd_rows[k])
                 if k == 0:
                     a0 = p + 1   # same cell: only spheres after i (ids sorted in a cell)
                 for q in range(a0, b0):
-                    self.examine(i, self.grid.order[q], ci, record)
+                    self.examine(xi, i, self.grid.order[q], ci, record)
                 for q in range(a1, b1):
-                    self.examine(i, self.grid.order[q], ci, record)
+                    self.examine(xi, i, self.grid.order[q], ci, record)
 
     @ti.func
     def clear_active(self, serial: ti.template()):
@@ -261,17 +269,18 @@ class Contacts:
         for t in range(self.n_touched[None]):
             i = self.touched[t]
             ci = self.grid.coords(self.grid.cell_of[i])
+            xi = self.state.x[i]
             for k in range(ti.static(len(ALL_ROWS))):
                 a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
                 for q in range(a0, b0):
-                    self.examine_if_new(i, self.grid.order[q], ci)
+                    self.examine_if_new(xi, i, self.grid.order[q], ci)
                 for q in range(a1, b1):
-                    self.examine_if_new(i, self.grid.order[q], ci)
+                    self.examine_if_new(xi, i, self.grid.order[q], ci)
 
     @ti.func
-    def examine_if_new(self, i, j, ci):
+    def examine_if_new(self, xi, i, j, ci):
         if j != i and (self.state.modified[j] == 0 or j > i):
-            self.examine(i, j, ci, False)
+            self.examine(xi, i, j, ci, False)
 
     # ---- resolution ----
     @ti.func

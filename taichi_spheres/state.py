@@ -99,6 +99,8 @@ class SphereState:
         self.real = real
         self.features = features
         self.r0 = float(scene.radius[0])
+        self.box_lo = tuple(float(c) for c in scene.box_lo)
+        self.box_hi = tuple(float(c) for c in scene.box_hi)
         self.x = ti.Vector.field(3, real, shape=n)
         self.v = ti.Vector.field(3, real, shape=n)
         self.radius = None if features.equal_radii else ti.field(real, shape=n)
