@@ -22,8 +22,7 @@ import taichi as ti
 
 from .state import SphereState
 
-__all__ = ["GridGeometry", "Grid", "BLOCK_PAIRS", "FORWARD_OFFSETS", "FORWARD_ROWS", "ALL_ROWS",
-           "SCAN_BLOCK"]
+__all__ = ["GridGeometry", "Grid", "BLOCK_PAIRS", "FORWARD_ROWS", "ALL_ROWS", "SCAN_BLOCK"]
 
 SCAN_BLOCK = 1024
 
@@ -51,13 +50,11 @@ def _block_pairs():
 
 #: The 14 cell pairs a cell owns (itself + 13), as offsets from the owner.
 BLOCK_PAIRS = _block_pairs()
-#: Half stencil for detection: (0,0,0) and the 13 lexicographically positive offsets.
-FORWARD_OFFSETS = ((0, 0, 0),) + tuple(
-    o for o in itertools.product((-1, 0, 1), repeat=3) if o > (0, 0, 0))
-ALL_OFFSETS = tuple(itertools.product((-1, 0, 1), repeat=3))
-#: The same stencils as rows along z, (dx, dy, dz_lo, dz_hi): the cells of one row are
-#: contiguous in the sorted order, so a row is one range of sphere ids (two if it
-#: wraps around a periodic z axis) instead of up to three cell look-ups.
+#: Neighbour stencils as rows along z, (dx, dy, dz_lo, dz_hi): the cells of one row are
+#: contiguous in the sorted order, so a row is one range of sphere ids (two if it wraps
+#: around a periodic z axis) instead of up to three cell look-ups. FORWARD_ROWS is the
+#: half stencil (the cell itself, then the 13 lexicographically positive neighbours);
+#: ALL_ROWS the full 27 cells.
 FORWARD_ROWS = ((0, 0, 0, 1), (0, 1, -1, 1), (1, -1, -1, 1), (1, 0, -1, 1), (1, 1, -1, 1))
 ALL_ROWS = tuple((dx, dy, -1, 1) for dx in (-1, 0, 1) for dy in (-1, 0, 1))
 

@@ -237,15 +237,5 @@ class Simulation:
         self._grid.build()
         return self._contacts.list_overlaps()
 
-    def describe(self) -> list:
-        """Lines describing arch, precision, grid and compiled features."""
-        g = self.geometry
-        return [f"arch: {self.runtime.arch} (Taichi {self.runtime.actual}), "
-                f"precision: {self.precision}",
-                f"spheres: {self.n}, grid: {g.dims[0]}x{g.dims[1]}x{g.dims[2]} cells of "
-                f"{' x '.join(f'{c:.4g}' for c in g.cell)} m, {len(g.colours)} colours",
-                f"step_fraction: {self.step_fraction}, max_sweeps: {self.max_sweeps}"] + \
-            self.features.describe()
-
     def _check(self):
         runtime.check(self.runtime)

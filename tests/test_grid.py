@@ -146,3 +146,16 @@ def test_scan_over_many_blocks(arch):
     start = sim._grid.start.to_numpy()
     counts = np.bincount(sim._grid.cell_of.to_numpy(), minlength=sim._grid.m)
     np.testing.assert_array_equal(start, np.concatenate([[0], np.cumsum(counts)]))
+
+
+def test_row_stencils_cover_the_half_and_full_stencils():
+    from taichi_spheres.grid import ALL_ROWS, FORWARD_ROWS
+
+    def cells(rows):
+        return sorted((dx, dy, dz) for dx, dy, lo, hi in rows for dz in range(lo, hi + 1))
+
+    half = [(0, 0, 0)] + [o for o in itertools.product((-1, 0, 1), repeat=3) if o > (0, 0, 0)]
+    assert cells(FORWARD_ROWS) == sorted(half)
+    # every unordered neighbour pair is seen once: o or -o, never both
+    assert all(tuple(-c for c in o) not in half for o in half if o != (0, 0, 0))
+    assert cells(ALL_ROWS) == sorted(itertools.product((-1, 0, 1), repeat=3))
