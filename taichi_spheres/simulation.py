@@ -193,6 +193,7 @@ class Simulation:
 
     def step(self, h: float) -> None:
         """One step of length h [s] (does not advance ``time``; use advance)."""
+        self._check()
         self._params.h[None] = h
         self._motion.drift()
         self._grid.build()
