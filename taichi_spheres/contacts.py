@@ -10,7 +10,9 @@ step is linear; with ``d``, ``u`` the relative position and velocity at the end 
 the step and ``sigma = r_i + r_j``, the time since contact ``s`` solves
 ``|d - u s| = sigma``: ``s = (sigma^2 - |d|^2) / (sqrt((d.u)^2 + |u|^2 (sigma^2 - |d|^2)) - d.u)``
 (the cancellation-free form of the larger root). The impulse is applied at contact
-and carried forward: ``x_i += dv_i s``, ``v_i += dv_i`` (gravity drops out).
+and carried forward: ``x_i += dv_i s``, ``v_i += dv_i`` (gravity drops out). Pairs
+found overlapping but already separating are collided too when they entered during
+this step (the step went past their closest approach), see ``contact_time``.
 
 Parallel resolution: see :mod:`taichi_spheres.grid` for ownership and colours. One
 thread per owner cell of the current colour repeatedly picks, among the overlapping
@@ -153,12 +155,31 @@ class Contacts:
         return du < -ti.cast(ti.static(self.approach_eps), self.real) * ti.sqrt(dd * uu)
 
     @ti.func
-    def time_since_contact(self, dd, du, uu, sigma):
-        """s >= 0 with |d - u s| = sigma for an overlapping approaching pair [s],
-        capped at the current step length."""
-        c = sigma * sigma - dd
-        s = c / (ti.sqrt(du * du + uu * c) - du)
-        return ti.min(s, self.params.h[None])
+    def contact_time(self, d, u, sigma):
+        """For an overlapping pair (|d| < sigma; d, u relative position and velocity at
+        the end of the step): the time s since it came into contact if that contact is
+        to be resolved now, else -1 [s]. |d - u s| = sigma is solved by the
+        cancellation-free root s = (sigma^2 - |d|^2) / (sqrt((d.u)^2 + |u|^2 (sigma^2 -
+        |d|^2)) - d.u). A pair is resolved if it approaches now (s capped at the step
+        length), or if it already passed its closest approach but entered during this
+        step (s <= h) while approaching: a collision the step went through. A pair that
+        was already overlapping when the step began and now separates (left over from
+        out-of-order resolution) is not."""
+        dd = d.norm_sqr()
+        du = d.dot(u)
+        uu = u.norm_sqr()
+        h = self.params.h[None]
+        out = ti.cast(-1, self.real)
+        if uu > 0:
+            c = sigma * sigma - dd
+            s = c / (ti.sqrt(du * du + uu * c) - du)
+            if self.approaching(dd, du, uu):
+                out = ti.min(s, h)
+            elif s <= h:
+                dc = d - u * s
+                if self.approaching(dc.norm_sqr(), dc.dot(u), uu):
+                    out = s
+        return out
 
     @ti.func
     def collide(self, i, j, s):
@@ -201,31 +222,30 @@ class Contacts:
     # ---- detection ----
     @ti.func
     def examine(self, xi, i, j, ci, record: ti.template()):
-        """Classify pair (i, j), i at xi in cell ci (vec3): an approaching overlap is
-        counted for its owner cell; a separating overlap only updates the max overlap.
-        record=True (tests): only append approaching overlaps to the debug list."""
+        """Classify pair (i, j), i at xi in cell ci (vec3): an overlap to resolve (see
+        contact_time) is counted for its owner cell; any other overlap only updates the
+        max overlap. record=True (tests): only append the pairs to resolve to a list."""
         d, sigma = self.separation_from(xi, i, j)
         dd = d.norm_sqr()
-        if ti.static(record):
-            if dd < sigma * sigma:
-                u = self.rel_velocity(i, j)
-                if self.approaching(dd, d.dot(u), u.norm_sqr()):
+        if dd < sigma * sigma:
+            s = self.contact_time(d, self.rel_velocity(i, j), sigma)
+            if ti.static(record):
+                if s >= 0:
                     slot = ti.atomic_add(self.debug_count[None], 1)
                     if slot < self.debug_pairs.shape[0]:
                         self.debug_pairs[slot] = ti.Vector([ti.min(i, j), ti.max(i, j)])
-        elif dd < sigma * sigma:
-            u = self.rel_velocity(i, j)
-            rel = 1 - ti.sqrt(dd) / sigma
-            if self.approaching(dd, d.dot(u), u.norm_sqr()):
-                cj = self.grid.coords(self.grid.cell_of[j])
-                owner = self.grid.linear(self.grid.owner(ci, cj))
-                if ti.atomic_add(self.active[owner], 1) == 0:
-                    self.first_pair[owner] = ti.Vector([i, j])
-                    self.active_list[ti.atomic_add(self.n_active[None], 1)] = owner
-                ti.atomic_add(self.params.count[REMAINING], 1)
-                ti.atomic_max(self.params.vals[OPEN_OVERLAP], rel)
             else:
-                ti.atomic_max(self.params.vals[SEP_OVERLAP], rel)
+                rel = 1 - ti.sqrt(dd) / sigma
+                if s >= 0:
+                    cj = self.grid.coords(self.grid.cell_of[j])
+                    owner = self.grid.linear(self.grid.owner(ci, cj))
+                    if ti.atomic_add(self.active[owner], 1) == 0:
+                        self.first_pair[owner] = ti.Vector([i, j])
+                        self.active_list[ti.atomic_add(self.n_active[None], 1)] = owner
+                    ti.atomic_add(self.params.count[REMAINING], 1)
+                    ti.atomic_max(self.params.vals[OPEN_OVERLAP], rel)
+                else:
+                    ti.atomic_max(self.params.vals[SEP_OVERLAP], rel)
 
     @ti.func
     def _detect_all_body(self):
@@ -285,16 +305,11 @@ class Contacts:
     # ---- resolution ----
     @ti.func
     def pair_contact(self, i, j):
-        """Time since contact of (i, j) if they overlap and approach, else -1 [s]."""
+        """Time since contact of (i, j) if it is a contact to resolve now, else -1 [s]."""
         s = ti.cast(-1, self.real)
         d, sigma = self.separation(i, j)
-        dd = d.norm_sqr()
-        if dd < sigma * sigma:
-            u = self.rel_velocity(i, j)
-            du = d.dot(u)
-            uu = u.norm_sqr()
-            if self.approaching(dd, du, uu):
-                s = self.time_since_contact(dd, du, uu, sigma)
+        if d.norm_sqr() < sigma * sigma:
+            s = self.contact_time(d, self.rel_velocity(i, j), sigma)
         return s
 
     @ti.func
