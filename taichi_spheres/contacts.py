@@ -89,6 +89,10 @@ class Contacts:
         self.active_list = ti.field(ti.i32, shape=grid.m)
         self.n_active = ti.field(ti.i32, shape=())
         self.touched = ti.field(ti.i32, shape=self.n)
+        # per sphere, the earliest contact (largest time since contact) among its pairs
+        # found by the last detection: a pair is collided only when it is the earliest
+        # contact of both its spheres, so colours do not reorder one sphere's collisions
+        self.earliest = ti.field(self.real, shape=self.n)
         self.n_touched = ti.field(ti.i32, shape=())
         self.debug_pairs = None     # allocated by list_overlaps (tests only)
 
@@ -237,6 +241,8 @@ class Contacts:
             else:
                 rel = 1 - ti.sqrt(dd) / sigma
                 if s >= 0:
+                    ti.atomic_max(self.earliest[i], s)
+                    ti.atomic_max(self.earliest[j], s)
                     cj = self.grid.coords(self.grid.cell_of[j])
                     owner = self.grid.linear(self.grid.owner(ci, cj))
                     if ti.atomic_add(self.active[owner], 1) == 0:
@@ -252,6 +258,9 @@ class Contacts:
         """Half-stencil scan of every sphere: fills ``active`` and count[REMAINING]."""
         self.params.reset_detection()
         self.clear_active(ti.static(self.serial_light))
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for i in range(self.n):
+            self.earliest[i] = -1
         self.scan_forward(False)
 
     @ti.func
@@ -313,9 +322,20 @@ class Contacts:
         return s
 
     @ti.func
+    def eligible(self, i, j, s):
+        """Pair (i, j) with contact time s may be collided now: it is the earliest
+        contact of both spheres as detected. Otherwise it waits for the next sweep (its
+        spheres are marked so that the next detection looks at them again)."""
+        ok = s >= 0 and s == self.earliest[i] and s == self.earliest[j]
+        if s >= 0 and not ok:
+            self.mark_touched(i)
+            self.mark_touched(j)
+        return ok
+
+    @ti.func
     def earliest_in_block(self, c):
-        """The overlapping approaching pair owned by cell c (vec3) with the earliest
-        contact (largest s): (i, j, s), or i = -1. Reads only spheres in c + {0,1}^3."""
+        """The eligible pair to resolve owned by cell c (vec3) with the earliest contact
+        (largest s): (i, j, s), or i = -1. Reads only spheres in c + {0,1}^3."""
         best_s = ti.cast(-1, self.real)
         bi = -1
         bj = -1
@@ -333,7 +353,7 @@ class Contacts:
                     for q in range(q0, self.grid.start[kb + 1]):
                         j = self.grid.order[q]
                         s = self.pair_contact(i, j)
-                        if s > best_s:
+                        if s > best_s and self.eligible(i, j, s):
                             best_s = s
                             bi = i
                             bj = j
@@ -354,7 +374,7 @@ class Contacts:
                 bi = self.first_pair[k][0]
                 bj = self.first_pair[k][1]
                 s = self.pair_contact(bi, bj)
-                if s < 0:
+                if not self.eligible(bi, bj, s):
                     bi = -1
             else:
                 bi, bj, s = self.earliest_in_block(c)
@@ -407,6 +427,7 @@ class Contacts:
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
         for t in range(self.n_touched[None]):
             self.motion.walls_and_wrap(self.touched[t])
+            self.earliest[self.touched[t]] = -1
         self.params.reset_detection()
         self.clear_active(ti.static(self.serial_light or serial))
         self.detect_from_modified(serial)
