@@ -296,34 +296,31 @@ def monotone_note(case):
 NOTES = """
 - **Missed collisions dominate, not integration error.** Between collisions the
   engine's drift is the exact ballistic path and every resolved collision is rewound
-  to contact, so with no missed collision the error is round-off. The large errors
-  (1e-1) at step_fraction 0.3 and 0.1 come from pair collisions the engine did not
-  see (compare the pair counts with the reference's); once no collision is missed
-  the error drops straight to round-off, with nothing in between.
-- **traj at 0.03 is not a safe setting in general:** it matches to ~1e-12 up to
-  t = 2 s, but in the longer `counts` run (same gas, t = 5 s) both 0.03 and 0.01 miss a
-  collision somewhere after t = 2 s, after which the trajectory diverges (x err ~0.8)
-  and the count ends 4 of 354 off; only 0.003 and 0.001 follow the reference to
-  t = 5 s (x err ~1e-6, which is the chaos-amplified round-off the chaos check predicts). Whether a grazing collision is seen depends on where the step
-  boundaries fall, so the setting that "first reaches" a threshold in a short run is
-  optimistic.
+  to contact, so with no missed collision the error is round-off. Large errors (~0.1)
+  mean a pair collision the engine did not see or resolved differently (compare the
+  pair counts with the reference's); there is nothing in between.
+- **traj** (elastic gas with walls, 2 s) follows the exact reference to round-off at
+  every step_fraction, 0.3 included: a pair is collided only when it is the earliest
+  detected contact of both its spheres, and pairs the step carried past their closest
+  approach are collided too, so the colours do not reorder a sphere's collisions.
+- **gravity** (e = 0.9 under gravity) still misses or reorders a collision at 0.3 and
+  0.1 and is at round-off from 0.03 on.
+- **counts** (same gas as traj, 5 s) misses one collision after t = 2 s at every
+  setting down to 0.01 (x err ~0.8 afterwards: the gas is chaotic); only 0.003 and 0.001
+  follow the reference to t = 5 s (x err ~1e-6, the chaos-amplified round-off the chaos
+  check predicts). A setting that "first reaches" a threshold in a short run is
+  therefore optimistic for long runs.
 - **Below ~1e-10 the error grows as the settings tighten**: more steps, more round-off,
-  and the gas amplifies it (see the chaos check). That is the f64 floor for these
-  horizons, not a convergence failure.
-- **Energy** is conserved to round-off (~1e-15) in f64 at every setting, even when
-  collisions are missed; in f32 to ~1e-6.
+  amplified by the gas (see the chaos check). That is the f64 floor for these horizons.
+- **Energy** is conserved to round-off (~1e-15) in f64 at every setting, even when a
+  collision is missed; in f32 to ~1e-6.
 - **bounce** does not discriminate between settings: wall contacts are rewound exactly
   on the parabola, so apex heights are exact to round-off (f64) or ~1e-6 (f32) at every
   step_fraction. It confirms the wall rewind, not the step control.
-- **f32** stays at ~1e-3 (traj) and ~1e-4 (gravity) at step_fraction 0.01: f32
-  round-off (~1e-7) amplified by the collisions.
-- **The exact reference is as fast as or faster than the engine here** at every setting
-  that reaches 1e-9 (dilute gas, N = 64, a few hundred events: about equal at 0.03,
-  10x faster at the 0.003 that the longer run needs): the engine's cost scales with
-  steps, the reference's with events (O(N) per event); the engine is for large N.
-- gravity case: the reference's reported small overlaps with gravity + walls + resting
-  spheres are avoided by a short horizon (no wall rests in the reference run); the
-  coarse engine settings do produce a wall rest.
+- **f32** rows are limited by f32 round-off (~1e-7) amplified by the collisions.
+- **The exact reference is as fast as or faster than the engine here** (dilute gas,
+  N = 64, a few hundred events): the engine's cost scales with steps, the reference's
+  with events (O(N) per event); the engine is for large N.
 """
 
 
