@@ -26,27 +26,7 @@ import taichi as ti  # noqa: E402
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.builders import gas  # noqa: E402
-
-
-def cpu_name():
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
-def gpu_name():
-    try:
-        import subprocess
-        out = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
-                             capture_output=True, text=True, timeout=10)
-        return out.stdout.strip().splitlines()[0] if out.returncode == 0 else None
-    except Exception:
-        return None
+from machine import cpu_name, gpu_name  # noqa: E402  (tools/machine.py)
 
 
 def timed_steps(sim, min_seconds, min_steps):
@@ -112,17 +92,14 @@ def feature_pairs(n):
     yield "walled gas: g = 0, equal radii and masses, e = 1", gas(n, periodic=False, **base)
 
 
-def best_step_seconds(sim, repeats, steps):
-    """Best (least disturbed) mean step time over ``repeats`` blocks of ``steps`` steps."""
-    best = float("inf")
-    for _ in range(repeats):
-        ti.sync()
-        t0 = time.perf_counter()
-        for _ in range(steps):
-            sim.step(sim.max_step())
-        ti.sync()
-        best = min(best, (time.perf_counter() - t0) / steps)
-    return best
+def step_seconds(sim, steps):
+    """Mean wall seconds per step over ``steps`` steps."""
+    ti.sync()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        sim.step(sim.max_step())
+    ti.sync()
+    return (time.perf_counter() - t0) / steps
 
 
 def compare_features(scene, arch, precision, repeats=5, steps=20):
@@ -138,7 +115,7 @@ def compare_features(scene, arch, precision, repeats=5, steps=20):
         st = sims[False].state()
         for flag, sim in sims.items():
             sim.set_state(st.x, st.v)
-            times[flag] = min(times[flag], best_step_seconds(sim, 1, steps))
+            times[flag] = min(times[flag], step_seconds(sim, steps))
     same = np.array_equal(sims[False].state().x, sims[True].state().x)
     for flag in (False, True):
         out[flag] = scene.n / times[flag]

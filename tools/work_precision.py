@@ -39,7 +39,6 @@ import argparse
 import datetime
 import math
 import os
-import platform
 import sys
 import time
 
@@ -52,22 +51,12 @@ import taichi_spheres as ts  # noqa: E402
 from taichi_spheres import observe  # noqa: E402
 from taichi_spheres.builders import gas  # noqa: E402
 from taichi_spheres.reference import EventDrivenReference  # noqa: E402
+from machine import cpu_name  # noqa: E402  (tools/machine.py)
 
 FRACTIONS = (0.3, 0.1, 0.03, 0.01, 0.003, 0.001)
 QUICK_FRACTIONS = (0.3, 0.03, 0.003)
 F32_FRACTIONS = (0.1, 0.01)
 THRESHOLDS = (1e-6, 1e-9)
-
-
-def cpu_name():
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 # ---- scenes ----
@@ -164,6 +153,21 @@ class Case:
         self.note = ""
 
 
+def trajectory_rows(case, scene, settings, T, xr, side, counter):
+    """Run the engine at each (precision, step_fraction) to time T; the error is
+    max |x - x_ref| / side; ``counter`` names the stat shown beside the pair count."""
+    label = {"steps": "steps", "wall_rests": "rests"}[counter]
+    for prec, f in settings:
+        sim = make_sim(scene, prec, f)
+        sim.advance_to(T)
+        err = float(np.abs(sim.state().x - xr).max() / side)
+        case.rows.append(dict(precision=prec, fraction=f, seconds=sim.sim_seconds, error=err,
+                              extra=f"pairs {sim.stats['pair_collisions']}, "
+                                    f"{label} {sim.stats[counter]}"))
+        report(case, case.rows[-1])
+    return case
+
+
 def run_traj(settings):
     case = Case("traj", "Trajectory, elastic gas N=64, walls, t = 2 s",
                 "max |x - x_ref| / box side")
@@ -175,15 +179,7 @@ def run_traj(settings):
     case.note = f"reference: {ref.stats['pair_collisions']} pair, " \
                 f"{ref.stats['wall_collisions']} wall collisions; chaos check: a 1e-12 " \
                 f"perturbation of the start grows to {chaos_check(scene, T, side):.1e} by t = {T:g}"
-    for prec, f in settings:
-        sim = make_sim(scene, prec, f)
-        sim.advance_to(T)
-        err = float(np.abs(sim.state().x - xr).max() / side)
-        case.rows.append(dict(precision=prec, fraction=f, seconds=sim.sim_seconds, error=err,
-                              extra=f"pairs {sim.stats['pair_collisions']}, "
-                                    f"steps {sim.stats['steps']}"))
-        report(case, case.rows[-1])
-    return case
+    return trajectory_rows(case, scene, settings, T, xr, side, "steps")
 
 
 def run_gravity(settings):
@@ -197,15 +193,7 @@ def run_gravity(settings):
     case.note = f"reference: {st['pair_collisions']} pair, {st['wall_collisions']} wall " \
                 f"collisions, {st['wall_rests']} wall rests; chaos check: a 1e-12 " \
                 f"perturbation of the start grows to {chaos_check(scene, T, side):.1e} by t = {T:g}"
-    for prec, f in settings:
-        sim = make_sim(scene, prec, f)
-        sim.advance_to(T)
-        err = float(np.abs(sim.state().x - xr).max() / side)
-        case.rows.append(dict(precision=prec, fraction=f, seconds=sim.sim_seconds, error=err,
-                              extra=f"pairs {sim.stats['pair_collisions']}, "
-                                    f"rests {sim.stats['wall_rests']}"))
-        report(case, case.rows[-1])
-    return case
+    return trajectory_rows(case, scene, settings, T, xr, side, "wall_rests")
 
 
 def run_counts(settings, T):
