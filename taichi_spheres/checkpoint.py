@@ -21,7 +21,8 @@ def scene_digest(scene) -> str:
     for arr in (scene.x, scene.v, scene.radius, scene.mass, scene.box_lo, scene.box_hi,
                 scene.gravity):
         h.update(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
-    h.update(repr((scene.periodic, scene.restitution, scene.wall_restitution)).encode())
+    h.update(repr((scene.periodic, scene.restitution, scene.wall_restitution,
+                   scene.restitution_model, scene.rest_speed)).encode())
     return h.hexdigest()
 
 

@@ -103,7 +103,7 @@ def _settings(scene: Scene):
 
 def cmd_info(scene: Scene, args):
     from .grid import GridGeometry
-    from .simulation import DEFAULT_STEP_FRACTION
+    from .simulation import DEFAULT_STEP_FRACTION, rest_speed_for
     from .state import Features
     run, physics, render = _settings(scene)
     fraction = physics.get("step_fraction", DEFAULT_STEP_FRACTION)
@@ -111,9 +111,11 @@ def cmd_info(scene: Scene, args):
                                 float(scene.radius.max()), float(scene.radius.min()),
                                 scene.n, fraction)
     precision = physics.get("precision") or ("f32" if args.arch in ("vulkan", "metal") else "f64")
-    features = Features.from_scene(scene)
+    rest_speed = rest_speed_for(scene, fraction)
+    features = Features.from_scene(scene, rest_speed)
     real = 8 if precision == "f64" else 4
-    per_sphere = 6 * real + 4 * 4 + real            # x, v, moved + modified, order, cell_of
+    # x, v, moved, earliest + modified, hits, order, cell_of, touched (+ support)
+    per_sphere = 6 * real + 2 * real + 5 * 4 + (4 if features.supports else 0)
     per_sphere += (0 if features.equal_radii else real) + (0 if features.equal_masses else real)
     per_cell = 4 * 4                                 # start, cursor, active, scan
     memory = scene.n * per_sphere + geom.n_cells * per_cell
@@ -122,8 +124,9 @@ def cmd_info(scene: Scene, args):
           f"mass {scene.mass.min():g}..{scene.mass.max():g} kg")
     print(f"box: {scene.box_lo.tolist()} .. {scene.box_hi.tolist()} m, "
           f"periodic {list(scene.periodic)}")
-    print(f"gravity: {scene.gravity.tolist()} m/s^2, restitution {scene.restitution:g}, "
-          f"wall restitution {scene.wall_restitution:g}")
+    print(f"gravity: {scene.gravity.tolist()} m/s^2, restitution {scene.restitution:g} "
+          f"({scene.restitution_model}), wall restitution {scene.wall_restitution:g}, "
+          f"rest speed {rest_speed:.3g} m/s")
     print(f"run: duration {run.get('duration', DEFAULT_DURATION):g} s at "
           f"{run.get('fps', DEFAULT_FPS):g} fps; precision {precision}; step_fraction {fraction:g}")
     print(f"grid: {geom.dims[0]}x{geom.dims[1]}x{geom.dims[2]} cells, {len(geom.colours)} colours")

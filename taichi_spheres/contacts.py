@@ -26,7 +26,8 @@ import numpy as np
 import taichi as ti
 
 from .grid import ALL_ROWS, BLOCK_PAIRS, FORWARD_ROWS, Grid
-from .params import MOVED, OPEN_OVERLAP, PAIRS, REMAINING, SEP_OVERLAP, VMAX2, StepParams
+from .params import (E_PAIRS, E_REST, MOVED, OPEN_OVERLAP, PAIRS, REMAINING, RESTED,
+                     SEP_OVERLAP, SUPPORTED, VIRIAL, VMAX2, StepParams)
 from .state import Features, SphereState
 from .walls import Motion
 
@@ -36,6 +37,17 @@ FEW_PAIRS = 1000
 #: Below this many, a CPU sweep still resolves serially (one launch for all colours:
 #: ~0.3 us per pair against ~150 us per parallel colour launch) but detects in parallel.
 SERIAL_RESOLVE_PAIRS = 50_000
+
+#: Cosine of the widest angle from vertical at which a slow contact counts as
+#: resting on a support (about 66 degrees: a sphere in the groove of two touching
+#: spheres, at 60 degrees, still does).
+SUPPORT_COS = 0.4
+
+#: Collapse rule (inelastic pairs only): a sphere's collisions in one step from this
+#: one on are perfectly inelastic in the normal direction (a time-stepped stand-in
+#: for the TC model of Luding & McNamara 1998: collisions closer in time than
+#: about h / COLLAPSE_HITS lose their normal relative velocity).
+COLLAPSE_HITS = 4
 
 #: Upper bound on collisions one owner cell resolves in one sweep (the rest wait
 #: for the next sweep).
@@ -187,25 +199,70 @@ class Contacts:
 
     @ti.func
     def collide(self, i, j, s):
-        """Rewind i, j by s to contact, apply the restitution impulse, carry forward."""
+        """Rewind i, j by s to contact, apply the restitution impulse, carry forward.
+
+        Restitution (see the module docstring): "normal" u_n' = -e u_n with the
+        tangential relative velocity unchanged; "smid" (Features.smid) the seed's rule
+        after Smid (2007), u' = e (u - 2 u_n n): the whole relative velocity of the
+        elastic result scaled by e about the centre of mass. Rest rule
+        (Features.rest_rule): an approach slower than the rest speed is perfectly
+        inelastic in the normal direction (u_n' = 0, tangential kept) whatever the
+        model. Supports (Features.supports): such a slow contact whose normal is
+        within about 66 degrees of vertical (SUPPORT_COS), with a supported sphere below (on the floor,
+        or itself stopped by a supported sphere in this step) and an unsupported one
+        above, stops the upper sphere's approach without moving the lower one (the
+        floor carries the load: shock propagation, Guendelman et al. 2003), unless
+        that would raise the upper sphere's kinetic energy; the upper sphere is then
+        supported. Energy removed is booked per cause (vals E_PAIRS, E_REST)."""
         d, sigma = self.separation(i, j)
         u = self.rel_velocity(i, j)
-        n = (d - u * s).normalized()
+        rc = d - u * s
+        n = rc.normalized()
         un = u.dot(n)
         if un < 0:
             e = ti.cast(1, self.real)
             if ti.static(not self.f.elastic):
                 e = self.params.e[None]
+            rest = False
+            if ti.static(not self.f.elastic):
+                # collapse rule: from a sphere's COLLAPSE_HITS-th collision in one
+                # step on, its collisions are perfectly inelastic (normal), so that
+                # dense clusters cannot collide without end within a step
+                rest = ti.max(self.state.hits[i], self.state.hits[j]) >= ti.static(COLLAPSE_HITS - 1)
+            if ti.static(self.f.rest_rule):
+                rest = rest or -un < self.params.rest_speed[None]
             wi = ti.cast(0.5, self.real)
             wj = ti.cast(0.5, self.real)
+            meff = ti.cast(ti.static(0.5 * self.state.m0), self.real)
             if ti.static(not self.f.equal_masses):
                 imi = self.state.inv_mass_of(i)
                 imj = self.state.inv_mass_of(j)
                 wi = imi / (imi + imj)
                 wj = imj / (imi + imj)
-            dv = -(1 + e) * un * n
-            dvi = wi * dv
-            dvj = -wj * dv
+                meff = 1 / (imi + imj)
+            dvi = ti.Vector.zero(self.real, 3)
+            dvj = ti.Vector.zero(self.real, 3)
+            done = False
+            if ti.static(self.f.supports):
+                if rest:
+                    done, dvi, dvj = self.supported_stop(i, j, n, un, s)
+            if not done:
+                if rest:
+                    dvi = -un * wi * n
+                    dvj = un * wj * n
+                    ti.atomic_add(self.params.vals[E_REST], 0.5 * meff * un * un)
+                    ti.atomic_add(self.params.count[RESTED], 1)
+                else:
+                    du = -(1 + e) * un * n
+                    loss = 0.5 * meff * (1 - e * e) * un * un
+                    if ti.static(self.f.smid):
+                        # u' = e (u - 2 u_n n): du = u' - u
+                        du = e * (u - 2 * un * n) - u
+                        loss = 0.5 * meff * (1 - e * e) * u.norm_sqr()
+                    dvi = wi * du
+                    dvj = -wj * du
+                    if ti.static(not self.f.elastic):
+                        ti.atomic_add(self.params.vals[E_PAIRS], loss)
             self.state.x[i] += dvi * s
             self.state.v[i] += dvi
             self.state.x[j] += dvj * s
@@ -214,9 +271,53 @@ class Contacts:
             self.mark_touched(j)
             self.state.moved[i] += dvi.norm() * s
             self.state.moved[j] += dvj.norm() * s
+            self.motion.count_hit(i)
+            self.motion.count_hit(j)
+            # virial r_ij . dp_i with r_ij the contact separation (j to i)
+            ti.atomic_add(self.params.vals[VIRIAL], rc.dot(dvi) * self.state.mass_of(i))
             ti.atomic_add(self.params.count[PAIRS], 1)
             ti.atomic_max(self.params.vals[VMAX2], ti.max(self.state.v[i].norm_sqr(), self.state.v[j].norm_sqr()))
             ti.atomic_max(self.params.vals[MOVED], ti.max(self.state.moved[i], self.state.moved[j]))
+
+    @ti.func
+    def supported_stop(self, i, j, n, un, s):
+        """The supported-contact rule of :meth:`collide` for a slow approach (u_n =
+        un < 0, n from j to i, contact s ago): (applied, dv_i, dv_j). Only the upper
+        sphere changes: by dv now and dv s in position (carried forward), so its
+        energy changes by m (|v + dv|^2 - |v|^2)/2 - m g.dv s (momentum is not
+        conserved: the support takes it). Applied only if that change is not
+        positive (beyond round-off); then the upper sphere is supported and the
+        loss is booked to the rest rule."""
+        done = False
+        dvi = ti.Vector.zero(self.real, 3)
+        dvj = ti.Vector.zero(self.real, 3)
+        up = n.dot(self.params.up[None])
+        upper = -1
+        si = self.state.support[i]
+        sj = self.state.support[j]
+        if up > SUPPORT_COS and sj == 1 and si == 0:
+            upper = i
+            dvi = -un * n          # (v_i' - v_j).n = 0
+        elif up < -SUPPORT_COS and si == 1 and sj == 0:
+            upper = j
+            dvj = un * n           # (v_i - v_j').n = 0
+        if upper >= 0:
+            dv = dvi + dvj
+            v = self.state.v[upper]
+            lift = -self.params.gravity[None].dot(dv) * s
+            gain = 0.5 * ((v + dv).norm_sqr() - v.norm_sqr()) + lift
+            # round-off: of the kinetic terms, and of the potential energy at the
+            # sphere's height (positions carry eps |x| of noise: spheres sitting
+            # on each other overlap by that much)
+            g = self.params.gravity[None].norm()
+            scale = 0.5 * v.norm_sqr() + ti.abs(lift) + g * (self.state.x[upper].norm() + self.state.rad(upper))
+            if gain <= ti.static(2 * self.approach_eps) * scale:
+                done = True
+                self.state.support[upper] = 1
+                ti.atomic_add(self.params.vals[E_REST], -self.state.mass_of(upper) * gain)
+                ti.atomic_add(self.params.count[RESTED], 1)
+                ti.atomic_add(self.params.count[SUPPORTED], 1)
+        return done, dvi, dvj
 
     @ti.func
     def mark_touched(self, i):

@@ -5,28 +5,37 @@ compiled kernel serve every step length and works on backends without f64
 arguments (Metal).
 """
 
+import numpy as np
 import taichi as ti
 
 # indices into StepParams.count (i32, per step)
-REMAINING, PAIRS, WALLS, WALL_RESTS = range(4)
-N_COUNTS = 4
+REMAINING, PAIRS, WALLS, WALL_RESTS, MULTI, RESTED, SUPPORTED = range(7)
+N_COUNTS = 7
 # indices into StepParams.vals (real, per step)
-SEP_OVERLAP, OPEN_OVERLAP, VMAX2, MOVED = range(4)
-N_VALS = 4
+SEP_OVERLAP, OPEN_OVERLAP, VMAX2, MOVED, E_PAIRS, E_WALLS, E_REST, VIRIAL = range(8)
+N_VALS = 8
 
 
 @ti.data_oriented
 class StepParams:
     """h [s]; gravity [m/s^2]; box lo/hi/size [m]; restitution e, e_wall; counters.
 
+    rest_speed [m/s]: pair approach speed below which e = 0 (0: rule off).
+    up: unit vector against gravity (zero without gravity).
     count: (N_COUNTS,) i32 — remaining approaching overlaps, pair and wall
-        collisions, wall rest clamps in the current step.
+        collisions, wall rest clamps, spheres with more than one collision, pair
+        collisions made perfectly inelastic by the rest rule, of which against a
+        supported sphere, in the current step.
     vals: (N_VALS,) real — max relative overlap of separating pairs, of
-        approaching pairs in the last detection, max |v|^2, max distance moved.
+        approaching pairs in the last detection, max |v|^2, max distance moved;
+        kinetic energy removed by pair restitution, by wall restitution, by the
+        rest rule [J]; collisional virial sum r_ij . dp_i [J] (all in this step).
     """
 
-    def __init__(self, scene, real):
+    def __init__(self, scene, real, rest_speed=0.0):
         self.real = real
+        self.rest_speed = ti.field(real, shape=())
+        self.up = ti.Vector.field(3, real, shape=())
         self.h = ti.field(real, shape=())
         self.gravity = ti.Vector.field(3, real, shape=())
         self.lo = ti.Vector.field(3, real, shape=())
@@ -42,6 +51,9 @@ class StepParams:
         self.size[None] = (scene.box_hi - scene.box_lo).tolist()
         self.e[None] = scene.restitution
         self.e_wall[None] = scene.wall_restitution
+        self.rest_speed[None] = rest_speed
+        g = float(np.linalg.norm(scene.gravity))
+        self.up[None] = (-scene.gravity / g).tolist() if g > 0 else [0.0, 0.0, 0.0]
 
     @ti.func
     def reset_step(self):

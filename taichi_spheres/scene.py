@@ -12,7 +12,10 @@ import math
 
 import numpy as np
 
-__all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE"]
+__all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE", "RESTITUTION_MODELS"]
+
+#: Pair restitution models: "normal" (default) and "smid" (the seed's rule).
+RESTITUTION_MODELS = ("normal", "smid")
 
 #: kg/m^3, used when neither ``mass`` nor ``density`` is given (water).
 DEFAULT_DENSITY = 1000.0
@@ -31,6 +34,11 @@ class Scene:
         radius: (N,) [m];  mass: (N,) [kg]
         box_lo, box_hi: (3,) box corners [m];  periodic: tuple of 3 bools
         gravity: (3,) [m/s^2];  restitution: pair e;  wall_restitution: wall e
+        restitution_model: "normal" (u_n' = -e u_n, tangential unchanged) or "smid"
+            (the seed's rule after Smid 2007: the whole relative velocity of the
+            elastic result is scaled by e about the centre of mass)
+        rest_speed: approach speed [m/s] below which a pair collision is perfectly
+            inelastic (e = 0; only with e < 1); None = automatic (see Simulation)
         name: free text used in output file names and logs.
     """
 
@@ -44,6 +52,8 @@ class Scene:
     gravity: np.ndarray
     restitution: float = 1.0
     wall_restitution: float = 1.0
+    restitution_model: str = "normal"
+    rest_speed: float | None = None
     name: str = "scene"
     #: settings read from a scene file that are not physics ([run], [physics] extras)
     meta: dict = dataclasses.field(default_factory=dict)
@@ -61,13 +71,15 @@ class Scene:
     def from_arrays(cls, x, v, radius, mass=None, density=None,
                     box=((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)), periodic=(False, False, False),
                     gravity=(0.0, 0.0, -9.81), restitution=1.0, wall_restitution=1.0,
-                    name="scene") -> "Scene":
+                    name="scene", restitution_model="normal", rest_speed=None) -> "Scene":
         """Build and validate a scene from arrays.
 
         x, v: (N, 3) positions [m] and velocities [m/s]. radius: scalar or (N,) [m].
         mass: scalar or (N,) [kg], or density: scalar or (N,) [kg/m^3] (mass = density
         * 4/3 pi r^3); give at most one of them, neither means density 1000 kg/m^3.
         box: ((xlo, ylo, zlo), (xhi, yhi, zhi)); periodic: per-axis bools.
+        restitution_model: "normal" or "smid"; rest_speed: None or >= 0 [m/s]
+        (see the class docstring).
         Raises ValueError naming the argument or sphere index at fault.
         """
         x = _array("x", x, ndim=2)
@@ -115,18 +127,30 @@ class Scene:
         gravity = _vector3("gravity", gravity)
         restitution = _restitution("restitution", restitution)
         wall_restitution = _restitution("wall_restitution", wall_restitution)
+        if restitution_model not in RESTITUTION_MODELS:
+            raise ValueError(f"restitution_model must be one of {RESTITUTION_MODELS}, "
+                             f"got {restitution_model!r}")
+        if rest_speed is not None:
+            try:
+                rest_speed = float(rest_speed)
+            except (TypeError, ValueError):
+                raise ValueError(f"rest_speed must be a number >= 0 or None, got {rest_speed!r}") from None
+            if not (math.isfinite(rest_speed) and rest_speed >= 0):
+                raise ValueError(f"rest_speed must be a finite number >= 0, got {rest_speed}")
         _inside_box(x, radius, lo, hi, periodic)
         _no_overlaps(x, radius, lo, hi, periodic)
         return cls(x=x, v=v, radius=radius, mass=mass, box_lo=lo, box_hi=hi,
                    periodic=periodic, gravity=gravity, restitution=restitution,
-                   wall_restitution=wall_restitution, name=str(name))
+                   wall_restitution=wall_restitution, restitution_model=restitution_model,
+                   rest_speed=rest_speed, name=str(name))
 
     def replace(self, **changes) -> "Scene":
         """A validated copy with some arguments of :meth:`from_arrays` changed."""
         args = dict(x=self.x, v=self.v, radius=self.radius, mass=self.mass,
                     box=(self.box_lo, self.box_hi), periodic=self.periodic,
                     gravity=self.gravity, restitution=self.restitution,
-                    wall_restitution=self.wall_restitution, name=self.name)
+                    wall_restitution=self.wall_restitution, name=self.name,
+                    restitution_model=self.restitution_model, rest_speed=self.rest_speed)
         if "density" in changes:
             args.pop("mass")
         args.update(changes)

@@ -7,6 +7,7 @@ Units are SI, z is up. See README "Scene files" for every key and its default.
     name = "seed_five"
     [box]      lo, hi (3 numbers, m), periodic (3 bools), wall_restitution
     [physics]  gravity (m/s^2, default none: not compiled in), restitution,
+               restitution_model ("normal" | "smid"), rest_speed (m/s),
                step_fraction, max_sweeps, precision
     [run]      duration (s), fps
     [render]   width, height (multiples of 16), camera_position, camera_lookat, fov,
@@ -34,7 +35,7 @@ except ImportError:  # Python 3.10
 
 import numpy as np
 
-from .scene import DEFAULT_DENSITY, Scene
+from .scene import DEFAULT_DENSITY, RESTITUTION_MODELS, Scene
 
 __all__ = ["load_scene", "scene_from_dict", "SceneFileError"]
 
@@ -44,7 +45,8 @@ _RENDER = {"width": int, "height": int, "camera_position": "vec3", "camera_looka
            "fov": float, "colours": str, "background": "vec3"}
 _BOX = {"lo": "vec3", "hi": "vec3", "periodic": "bool3", "wall_restitution": float}
 _PHYSICS = {"gravity": "vec3", "restitution": float, "step_fraction": float,
-            "max_sweeps": int, "precision": str}
+            "max_sweeps": int, "precision": str, "restitution_model": str,
+            "rest_speed": float}
 _RUN = {"duration": float, "fps": float}
 _OUTPUT = {"video": str, "snapshots": bool, "checkpoint_every": int}
 _SPHERE = {"colour": "vec3", "x": "vec3", "v": "vec3", "radius": float, "mass": float,
@@ -140,6 +142,8 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
             gravity=physics.get("gravity", [0.0, 0.0, 0.0]),
             restitution=physics.get("restitution", 1.0),
             wall_restitution=box.get("wall_restitution", 1.0),
+            restitution_model=physics.get("restitution_model", "normal"),
+            rest_speed=physics.get("rest_speed"),
             name=data.get("name", "scene"))
     except ValueError as exc:
         raise SceneFileError(source, [str(exc) + _origins(str(exc), groups, arrays)]) from None
@@ -250,6 +254,13 @@ def _check_values(box, physics, problems):
     value = _valid(physics, "step_fraction", _PHYSICS)
     if value is not None and not 0 < value <= 1:
         problems.append(f"physics.step_fraction: must be in (0, 1], got {value!r}")
+    value = _valid(physics, "restitution_model", _PHYSICS)
+    if value is not None and value not in RESTITUTION_MODELS:
+        problems.append(f"physics.restitution_model: must be one of "
+                        f"{', '.join(repr(m) for m in RESTITUTION_MODELS)}, got {value!r}")
+    value = _valid(physics, "rest_speed", _PHYSICS)
+    if value is not None and not value >= 0:
+        problems.append(f"physics.rest_speed: must be >= 0 m/s, got {value!r}")
     value = _valid(physics, "max_sweeps", _PHYSICS)
     if value is not None and value < 1:
         problems.append(f"physics.max_sweeps: must be >= 1, got {value!r}")

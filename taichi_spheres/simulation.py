@@ -21,14 +21,18 @@ import taichi as ti
 
 from . import runtime
 from .contacts import Contacts
+from .projection import DEFAULT_TOLERANCE, MAX_ITERATIONS, Projection
 from .grid import Grid, GridGeometry
-from .params import (MOVED, N_COUNTS, OPEN_OVERLAP, PAIRS, REMAINING, SEP_OVERLAP, VMAX2,
-                     WALL_RESTS, WALLS, StepParams)
+from . import observe
+from .params import (E_PAIRS, E_REST, E_WALLS, MOVED, MULTI, OPEN_OVERLAP, PAIRS, REMAINING,
+                     RESTED, SEP_OVERLAP, SUPPORTED, VIRIAL, VMAX2, WALL_RESTS, WALLS,
+                     StepParams)
 from .scene import Scene
 from .state import Features, SphereState, State
 from .walls import Motion
 
-__all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS"]
+__all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS", "rest_speed_for",
+           "REST_SPEED_FACTOR"]
 
 #: Default largest move per step as a fraction of the smallest radius. Two spheres
 #: then close in by at most 0.2 r per step, so a pair can only pass through each
@@ -36,12 +40,30 @@ __all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS"]
 #: parameters within (0.1)^2/4 = 0.25 % of sigma^2 of grazing, which exchange almost
 #: no momentum. Tighter values trade speed for accuracy (tools/work_precision.py).
 DEFAULT_STEP_FRACTION = 0.1
+#: Automatic rest speed under gravity, in units of sqrt(2 g D) with D = step_fraction
+#: x smallest radius: the largest speed gravity adds to a pair in one step (a
+#: sphere resting on a support gains g h <= sqrt(2 g D) before the contact is
+#: resolved). Bounces slower than this (dropped from below 4 D = 0.4 r at the
+#: default step) are perfectly inelastic; the threshold shrinks with step_fraction.
+REST_SPEED_FACTOR = 2.0
 #: Default limit on detect/resolve sweeps per step.
 DEFAULT_MAX_SWEEPS = 32
 # below these sphere counts CPU loops run serially: Taichi's CPU parallel-for costs
 # ~150 us per launch, more than the whole loop for small N
 _SERIAL_LIGHT_BELOW = 200_000
 _SERIAL_HEAVY_BELOW = 3_000
+
+
+def rest_speed_for(scene: Scene, step_fraction: float = DEFAULT_STEP_FRACTION) -> float:
+    """The rest speed a Simulation uses [m/s]: the scene's ``rest_speed`` if given,
+    else REST_SPEED_FACTOR * sqrt(2 |g| step_fraction r_min) with gravity and 0
+    (rule off) without; always 0 for elastic pairs (e = 1 stays exactly elastic)."""
+    if scene.restitution == 1.0:
+        return 0.0
+    if scene.rest_speed is not None:
+        return float(scene.rest_speed)
+    g = float(np.linalg.norm(scene.gravity))
+    return REST_SPEED_FACTOR * math.sqrt(2.0 * g * step_fraction * float(scene.radius.min()))
 
 
 class Simulation:
@@ -69,11 +91,13 @@ class Simulation:
         self.scene = scene
         self.step_fraction = step_fraction
         self.max_sweeps = max_sweeps
-        self.features = Features.from_scene(scene)
+        self.rest_speed = rest_speed_for(scene, step_fraction)
+        self.features = Features.from_scene(scene, self.rest_speed)
         if compile_all:
             self.features = Features(gravity_axes=(True, True, True),
                                      wall_axes=self.features.wall_axes, equal_radii=False,
-                                     equal_masses=False, elastic=False, elastic_walls=False)
+                                     equal_masses=False, elastic=False, elastic_walls=False,
+                                     smid=self.features.smid, rest_rule=self.features.rest_rule)
         self.geometry = GridGeometry.for_box(
             scene.box_lo, scene.box_hi, scene.periodic, float(scene.radius.max()),
             float(scene.radius.min()), scene.n, step_fraction)
@@ -85,17 +109,25 @@ class Simulation:
         serial_light = cpu and n < _SERIAL_LIGHT_BELOW
         serial_heavy = cpu and n < _SERIAL_HEAVY_BELOW
         self._state = SphereState(scene, self.features, real)
-        self._params = StepParams(scene, real)
+        self._params = StepParams(scene, real, self.rest_speed)
         self._motion = Motion(self._state, self._params, self.features, serial_light)
         self._grid = Grid(self.geometry, self._state, serial_light)
         self._contacts = Contacts(self._state, self._grid, self._params, self._motion,
                                   self.features, serial_light, serial_heavy, serial_few=cpu)
+        self.overlap_tolerance = DEFAULT_TOLERANCE
+        self._projection = Projection(self._state, self._grid, self._params, self._motion,
+                                      self.features, self._contacts.separation_from,
+                                      serial_light, self.overlap_tolerance)
         self._r_min = float(scene.radius.min())
         self._g = float(np.linalg.norm(scene.gravity))
         self.time = 0.0
         self._totals = dict(steps=0, pair_collisions=0, wall_collisions=0, wall_rests=0,
                             sweeps=0, unresolved=0, max_overlap=0.0, sweep_limit_hits=0,
-                            grid_rebuilds=0)
+                            grid_rebuilds=0, multi_collision_spheres=0, rest_collisions=0,
+                            supported_collisions=0, energy_pair_restitution=0.0,
+                            energy_wall_restitution=0.0, energy_rest_rule=0.0, virial=0.0,
+                            projected_steps=0, projected_pairs=0)
+        self.initial_energy = observe.total_energy(scene, scene.gravity)
         self.last_step = dict(h=0.0, unresolved=0, max_overlap=0.0, sweeps=0)
         self.sim_seconds = 0.0   # wall-clock time spent in advance()
         self._motion.measure_vmax()
@@ -111,11 +143,38 @@ class Simulation:
         """Counters since the start: steps, pair_collisions, wall_collisions, sweeps,
         max_overlap (largest overlap left after a step / contact distance),
         unresolved (approaching overlaps left when a step hit the sweep limit, summed
-        over steps), wall_rests, sweep_limit_hits, grid_rebuilds; plus time and dt."""
+        over steps), wall_rests, sweep_limit_hits, grid_rebuilds;
+        multi_collision_spheres (spheres with more than one pair or wall collision in
+        a step, summed over steps: collisions of one sphere within a step are
+        resolved one after another, a source of error), rest_collisions (pair
+        collisions made perfectly inelastic by the rest rule), supported_collisions
+        (of which against a supported sphere); energy_pair_restitution,
+        energy_wall_restitution, energy_rest_rule (kinetic energy removed by each
+        cause [J]; see :meth:`energy_budget`); virial (sum over pair collisions of
+        r_ij . dp_i at contact [J]: the collisional pressure over a time T in volume V
+        is virial / (3 V T)); plus time and dt."""
         out = dict(self._totals)
         out["time"] = self.time
         out["dt"] = self.last_step["h"]
         return out
+
+    def energy_budget(self) -> dict:
+        """Where the energy went since the start [J]: initial, current (kinetic +
+        potential, potential -m g.x), kinetic, potential, the losses booked by pair
+        restitution, wall restitution and the rest rule, and ``unaccounted`` = initial
+        - current - booked losses (round-off; or, with resting contact, the energy
+        moved by placing spheres back on walls and by overlaps left over)."""
+        st = self.state()
+        ke = observe.kinetic_energy(st)
+        pe = observe.potential_energy(st, self.scene.gravity)
+        t = self._totals
+        booked = (t["energy_pair_restitution"] + t["energy_wall_restitution"]
+                  + t["energy_rest_rule"])
+        return dict(initial=self.initial_energy, current=ke + pe, kinetic=ke, potential=pe,
+                    pair_restitution=t["energy_pair_restitution"],
+                    wall_restitution=t["energy_wall_restitution"],
+                    rest_rule=t["energy_rest_rule"],
+                    unaccounted=self.initial_energy - (ke + pe) - booked)
 
     def state(self) -> State:
         """Numpy (float64) copy of positions, velocities, radii, masses and time."""
@@ -156,7 +215,7 @@ class Simulation:
                                  f"simulation's {mine!r}")
         self.set_state(ckpt["x"], ckpt["v"], ckpt["time"])
         self._vmax2 = float(ckpt["vmax2"])
-        self._totals = dict(ckpt["totals"])
+        self._totals.update(ckpt["totals"])
         self.last_step = dict(ckpt["last_step"])
 
     def advance(self, duration: float) -> None:
@@ -213,22 +272,50 @@ class Simulation:
                 vals[MOVED] = 0
                 remaining = count[REMAINING]
                 self._totals["grid_rebuilds"] += 1
-        counts = [count[k] for k in range(N_COUNTS)]
+        counts = count.to_numpy()
+        v = vals.to_numpy().astype(np.float64)
         t = self._totals
         t["steps"] += 1
         t["sweeps"] += sweeps
-        t["pair_collisions"] += counts[PAIRS]
-        t["wall_collisions"] += counts[WALLS]
-        t["wall_rests"] += counts[WALL_RESTS]
-        overlap = float(vals[SEP_OVERLAP])
+        t["pair_collisions"] += int(counts[PAIRS])
+        t["wall_collisions"] += int(counts[WALLS])
+        t["wall_rests"] += int(counts[WALL_RESTS])
+        t["multi_collision_spheres"] += int(counts[MULTI])
+        t["rest_collisions"] += int(counts[RESTED])
+        t["supported_collisions"] += int(counts[SUPPORTED])
+        t["energy_pair_restitution"] += float(v[E_PAIRS])
+        t["energy_wall_restitution"] += float(v[E_WALLS])
+        t["energy_rest_rule"] += float(v[E_REST])
+        t["virial"] += float(v[VIRIAL])
+        remaining = int(counts[REMAINING])
+        overlap = float(v[SEP_OVERLAP])
         if remaining > 0:
             t["unresolved"] += remaining
             t["sweep_limit_hits"] += 1
-            overlap = max(overlap, float(vals[OPEN_OVERLAP]))
+            overlap = max(overlap, float(v[OPEN_OVERLAP]))
+        if overlap > self.overlap_tolerance:
+            overlap = self._project()
         t["max_overlap"] = max(t["max_overlap"], overlap)
-        self._vmax2 = float(vals[VMAX2])
+        self._vmax2 = float(v[VMAX2])
         self.last_step = dict(h=h, unresolved=remaining, max_overlap=overlap, sweeps=sweeps,
-                              pair_collisions=counts[PAIRS], wall_collisions=counts[WALLS])
+                              pair_collisions=int(counts[PAIRS]),
+                              wall_collisions=int(counts[WALLS]),
+                              multi_collision_spheres=int(counts[MULTI]))
+
+    def _project(self) -> float:
+        """Push apart pairs overlapping beyond the tolerance (projection.py); returns
+        the largest relative overlap the last iteration measured."""
+        proj = self._projection
+        worst = 0.0
+        for _ in range(MAX_ITERATIONS):
+            self._grid.build()
+            proj.project_once()
+            worst = float(proj.worst[None])
+            if worst <= self.overlap_tolerance:
+                break
+            self._totals["projected_pairs"] += int(proj.pushed[None])
+        self._totals["projected_steps"] += 1
+        return worst
 
     # ---- introspection used by tests and tools ----
     def grid_overlaps(self) -> np.ndarray:

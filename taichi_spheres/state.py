@@ -27,15 +27,27 @@ class Features:
     equal_masses: bool
     elastic: bool            # pair restitution == 1
     elastic_walls: bool      # wall restitution == 1
+    smid: bool = False       # pair restitution model "smid" (only with elastic False)
+    rest_rule: bool = False  # e = 0 below the rest speed (only with elastic False)
 
     @classmethod
-    def from_scene(cls, scene: Scene) -> "Features":
+    def from_scene(cls, scene: Scene, rest_speed: float = 0.0) -> "Features":
+        """rest_speed: the resolved rest speed [m/s] (0 turns the rule off)."""
+        elastic = scene.restitution == 1.0
         return cls(gravity_axes=tuple(bool(g != 0.0) for g in scene.gravity),
                    wall_axes=tuple(not p for p in scene.periodic),
                    equal_radii=bool(np.all(scene.radius == scene.radius[0])),
                    equal_masses=bool(np.all(scene.mass == scene.mass[0])),
-                   elastic=scene.restitution == 1.0,
-                   elastic_walls=scene.wall_restitution == 1.0)
+                   elastic=elastic,
+                   elastic_walls=scene.wall_restitution == 1.0,
+                   smid=not elastic and scene.restitution_model == "smid",
+                   rest_rule=not elastic and rest_speed > 0)
+
+    @property
+    def supports(self) -> bool:
+        """Slow contacts on top of supported spheres (floor or a supported sphere
+        below) treat the lower sphere as immovable: needs gravity and the rest rule."""
+        return self.gravity and self.rest_rule
 
     @property
     def gravity(self) -> bool:
@@ -64,6 +76,9 @@ class Features:
             "pair restitution: " + ("1, elastic (compiled out)" if self.elastic else "inelastic"),
             "wall restitution: " + ("1, elastic (compiled out)" if self.elastic_walls
                                     else "inelastic"),
+            "restitution model: " + ("smid" if self.smid else "normal"),
+            "rest rule: " + ("on" + (", with supports" if self.supports else "")
+                             if self.rest_rule else "off (compiled out)"),
         ]
 
 
@@ -91,6 +106,9 @@ class SphereState:
         inv_mass: (N,) real, only without equal masses [1/kg]
         modified: (N,) i32 — touched by a collision in the current sweep
         moved: (N,) real — bound on the distance moved since the grid was built [m]
+        hits: (N,) i32 — pair and wall collisions in the current step
+        support: (N,) i32, only with features.supports — 1 when the sphere rests on
+            the floor or on a supported sphere in the current step
     """
 
     def __init__(self, scene: Scene, features: Features, real):
@@ -99,6 +117,7 @@ class SphereState:
         self.real = real
         self.features = features
         self.r0 = float(scene.radius[0])
+        self.m0 = float(scene.mass[0])
         self.box_lo = tuple(float(c) for c in scene.box_lo)
         self.box_hi = tuple(float(c) for c in scene.box_hi)
         self.x = ti.Vector.field(3, real, shape=n)
@@ -107,6 +126,8 @@ class SphereState:
         self.inv_mass = None if features.equal_masses else ti.field(real, shape=n)
         self.modified = ti.field(ti.i32, shape=n)
         self.moved = ti.field(real, shape=n)
+        self.hits = ti.field(ti.i32, shape=n)
+        self.support = ti.field(ti.i32, shape=n) if features.supports else None
         self.load(scene.x, scene.v, scene.radius, scene.mass)
 
     def load(self, x, v, radius, mass):
@@ -136,3 +157,11 @@ class SphereState:
     def inv_mass_of(self, i):
         """1/m of sphere i [1/kg]; only called when masses differ."""
         return self.inv_mass[i]
+
+    @ti.func
+    def mass_of(self, i):
+        """Mass of sphere i [kg] (a constant when all masses are equal)."""
+        m = ti.cast(ti.static(self.m0), self.real)
+        if ti.static(not self.features.equal_masses):
+            m = 1 / self.inv_mass[i]
+        return m

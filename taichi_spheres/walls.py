@@ -23,7 +23,7 @@ kinetic energy, counted in ``stats['wall_rests']``.
 
 import taichi as ti
 
-from .params import VMAX2, WALLS, WALL_RESTS, StepParams
+from .params import E_WALLS, MULTI, VMAX2, WALLS, WALL_RESTS, StepParams
 from .state import Features, SphereState
 
 MAX_WALL_BOUNCES = 8
@@ -102,6 +102,7 @@ class Motion:
             r = self.state.rad(i)
             h = self.params.h[None]
             moved = ti.cast(0, self.real)
+            on_floor = False   # touched the wall gravity points into, in this call
             e_w = ti.cast(1, self.real)
             if ti.static(not self.f.elastic_walls):
                 e_w = self.params.e_wall[None]
@@ -123,6 +124,9 @@ class Motion:
                             d = hi_c - x[a]
                         if side == 0:
                             break
+                        if ti.static(self.f.gravity_axes[a]):
+                            if side * g_a > 0:
+                                on_floor = True
                         w = v[a] * side * -1
                         acc = g_a * side * -1
                         s = self._contact_time(d, w, acc, self.f.gravity_axes[a])
@@ -138,6 +142,9 @@ class Motion:
                             v[a] = (wn + acc * s) * side * -1
                             moved += (wn - wc) * s
                             ti.atomic_add(self.params.count[WALLS], 1)
+                            self.count_hit(i)
+                            if ti.static(not self.f.elastic_walls):
+                                ti.atomic_add(self.params.vals[E_WALLS], ti.cast(0.5, self.real) * self.state.mass_of(i) * (wc * wc - wn * wn))
                             bounced = True
                         if not bounced and bounce < MAX_WALL_BOUNCES:
                             # past the wall without a crossing on its current path: a
@@ -157,6 +164,9 @@ class Motion:
                                 v[a] = wn * side * -1
                                 moved += -2 * d
                                 ti.atomic_add(self.params.count[WALLS], 1)
+                                self.count_hit(i)
+                                if ti.static(not self.f.elastic_walls):
+                                    ti.atomic_add(self.params.vals[E_WALLS], ti.cast(0.5, self.real) * self.state.mass_of(i) * (w * w - wn * wn))
                             else:
                                 # put it on the wall and pay the potential energy of the
                                 # lift -acc*d out of its normal kinetic energy, so energy
@@ -184,8 +194,17 @@ class Motion:
                             ti.atomic_add(self.params.count[WALL_RESTS], 1)
                             break
             self.state.moved[i] += moved
+            if ti.static(self.f.supports):
+                if on_floor and v.dot(self.params.up[None]) <= self.params.rest_speed[None]:
+                    self.state.support[i] = 1
         self.state.x[i] = x
         self.state.v[i] = v
+
+    @ti.func
+    def count_hit(self, i):
+        """One more collision of sphere i in this step (counts spheres with several)."""
+        if ti.atomic_add(self.state.hits[i], 1) == 1:
+            ti.atomic_add(self.params.count[MULTI], 1)
 
     @ti.func
     def _drift_body(self):
@@ -197,6 +216,9 @@ class Motion:
         ti.loop_config(serialize=ti.static(self.serial_light))
         for i in range(self.n):
             h = self.params.h[None]
+            self.state.hits[i] = 0
+            if ti.static(self.f.supports):
+                self.state.support[i] = 0
             if ti.static(self.f.gravity):
                 grav = self.params.gravity[None]
                 self.state.x[i] += self.state.v[i] * h + ti.cast(0.5, self.real) * grav * h * h

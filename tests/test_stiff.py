@@ -43,8 +43,6 @@ def test_bouncing_ball_comes_to_rest_at_the_analytic_time(arch, precision, e):
     assert sim.stats["wall_rests"] >= 1
 
 
-@pytest.mark.xfail(strict=True, reason="issue 4: resting contact in stacks is not handled yet; "
-                   "the sweep limit is hit every step and spheres sink into each other")
 def test_stacked_column_comes_to_rest(arch):
     r, n = 0.05, 10
     x = np.array([[0.5, 0.5, r + (2 * r + 0.001) * k] for k in range(n)])
