@@ -157,19 +157,14 @@ def staged_step(sim, h, times) -> int:
     return sweeps
 
 
-def timed_block(sim, min_seconds, min_steps) -> dict:
-    """Alternate, on the same states, a staged pass (staged_step; then the state is put
-    back, untimed) and a full Simulation.step, until both minima are met. Returns steps,
-    full [s], stages {stage: s}, sim_time [s] (sum of h), collisions, sweeps (full steps)."""
+def plain_block(sim, min_seconds, min_steps) -> dict:
+    """Consecutive steps of length sim.max_step(), as advance() takes them, until both
+    minima are met. Returns steps, full [s], sim_time [s] (sum of h), collisions, sweeps."""
     c0, s0 = sim.stats["pair_collisions"], sim.stats["sweeps"]
-    out = dict(steps=0, full=0.0, sim_time=0.0, stages=dict.fromkeys(STAGES, 0.0))
+    out = dict(steps=0, full=0.0, sim_time=0.0)
+    ti.sync()
     while out["steps"] < min_steps or out["full"] < min_seconds:
         h = sim.max_step()
-        snapshot, vmax2 = sim.state(), sim._vmax2
-        staged_step(sim, h, out["stages"])
-        sim.set_state(snapshot.x, snapshot.v)
-        sim._vmax2 = vmax2
-        ti.sync()
         t0 = time.perf_counter()
         sim.step(h)
         ti.sync()
@@ -178,6 +173,32 @@ def timed_block(sim, min_seconds, min_steps) -> dict:
         out["steps"] += 1
     out["collisions"] = sim.stats["pair_collisions"] - c0
     out["sweeps"] = sim.stats["sweeps"] - s0
+    return out
+
+
+def _restore(sim, snapshot, vmax2):
+    """Put a Simulation back to a state() snapshot and its step bound (untimed)."""
+    sim.set_state(snapshot.x, snapshot.v)
+    sim._vmax2 = vmax2
+    ti.sync()
+
+
+def staged_block(sim, min_seconds, min_steps) -> dict:
+    """Alternate, on the same states, a staged pass (staged_step) and a full
+    Simulation.step, each right after the same untimed restore of the state (so both
+    start alike), until both minima are met. Returns steps, full [s], stages {stage: s}."""
+    out = dict(steps=0, full=0.0, stages=dict.fromkeys(STAGES, 0.0))
+    while out["steps"] < min_steps or out["full"] < min_seconds:
+        h = sim.max_step()
+        snapshot, vmax2 = sim.state(), sim._vmax2
+        _restore(sim, snapshot, vmax2)
+        staged_step(sim, h, out["stages"])
+        _restore(sim, snapshot, vmax2)
+        t0 = time.perf_counter()
+        sim.step(h)
+        ti.sync()
+        out["full"] += time.perf_counter() - t0
+        out["steps"] += 1
     return out
 
 
@@ -203,23 +224,27 @@ def render_ms(sim, scene, frames=3):
 
 
 def measure(scene, arch, precision, min_seconds, blocks=3, render=False) -> dict:
-    """One row: build, warm up, then ``blocks`` timed blocks of >= 10 steps and
-    min_seconds / blocks s each. Whole-step figures come from the block with the fastest
-    full step, each stage from the block where that stage was fastest (the least
-    disturbed by other load on a shared machine). Rates are per wall second; stage and
-    step times in ms per step; memory in bytes."""
+    """One row: build and warm up, then ``blocks`` plain blocks (throughput) interleaved
+    with ``blocks`` staged blocks (stage costs), each of >= 10 steps and
+    min_seconds / blocks s. Every figure is the fastest of its blocks (the least
+    disturbed by other load on a shared machine). Rates are per wall second, step and
+    stage times in ms per step, memory in bytes."""
     ts_runtime.ensure(arch, precision)      # a re-initialisation frees memory: not here
     sim, info = build(lambda: ts.Simulation(scene, arch=arch, precision=precision))
-    done = [timed_block(sim, min_seconds / blocks, 10) for _ in range(blocks)]
-    best = min(done, key=lambda b: b["full"] / b["steps"])
+    plain, staged = [], []
+    for _ in range(blocks):
+        plain.append(plain_block(sim, min_seconds / blocks, 10))
+        staged.append(staged_block(sim, min_seconds / blocks, 10))
+    best = min(plain, key=lambda b: b["full"] / b["steps"])
     n, steps, secs = scene.n, best["steps"], best["full"]
-    stages_ms = {k: min(b["stages"][k] / b["steps"] for b in done) * 1e3 for k in STAGES}
+    stages_ms = {k: min(b["stages"][k] / b["steps"] for b in staged) * 1e3 for k in STAGES}
+    same_ms = min(b["full"] / b["steps"] for b in staged) * 1e3
     bare_ms = stages_ms["drift"] + stages_ms["grid"] + stages_ms["detect"]
     row = dict(n=n, precision=precision, steps=steps, sphere_steps=n * steps / secs,
                collisions=best["collisions"] / secs, sim_per_wall=best["sim_time"] / secs,
-               step_ms=secs / steps * 1e3, stages_ms=stages_ms,
+               step_ms=secs / steps * 1e3, stages_ms=stages_ms, same_ms=same_ms,
                stage_sum_ms=sum(stages_ms.values()), bare_ms=bare_ms,
-               ratio=(secs / steps * 1e3) / bare_ms, sweeps=best["sweeps"] / steps, **info)
+               ratio=same_ms / bare_ms, sweeps=best["sweeps"] / steps, **info)
     if render:
         row["render_ms"], row["render_error"] = render_ms(sim, scene)
     return row
