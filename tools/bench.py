@@ -297,22 +297,29 @@ def step_seconds(sim, steps) -> float:
 
 
 def compare_features(make_off, make_on, repeats=5, steps=20) -> dict:
-    """Alternate blocks of ``steps`` steps of two builds of one scene (compiled out:
-    make_off(), compiled in: make_on()) from the same states, keep the best block of
-    each. Returns sphere-steps/s and field bytes per sphere of each, and whether the
-    final states are identical."""
+    """Pairs of adjacent blocks of ``steps`` steps of two builds of one scene (compiled
+    out: make_off(), compiled in: make_on()) from the same states, in alternating order.
+    Returns off/on: best sphere-steps/s of each; speedup: median over the pairs of
+    (compiled-in time / compiled-out time), with its quartiles (q1, q3), which other
+    load disturbs less than a ratio of two bests; off_bytes/on_bytes: field bytes per
+    sphere; same: whether the final states are identical."""
     sims = {"off": make_off(), "on": make_on()}
     for sim in sims.values():
         sim.step(sim.max_step())
-    best = dict.fromkeys(sims, float("inf"))
-    for _ in range(repeats):
+    best, ratios = dict.fromkeys(sims, float("inf")), []
+    for rep in range(repeats):
         st = sims["off"].state()
-        for key, sim in sims.items():
-            sim.set_state(st.x, st.v)
-            best[key] = min(best[key], step_seconds(sim, steps))
+        secs = {}
+        for key in (("off", "on") if rep % 2 == 0 else ("on", "off")):
+            sims[key].set_state(st.x, st.v)
+            secs[key] = step_seconds(sims[key], steps)
+            best[key] = min(best[key], secs[key])
+        ratios.append(secs["on"] / secs["off"])
     n = sims["off"].n
-    return dict(off=n / best["off"], on=n / best["on"],
-                off_bytes=field_bytes(sims["off"]) / n, on_bytes=field_bytes(sims["on"]) / n,
+    q1, med, q3 = np.percentile(ratios, [25, 50, 75])
+    return dict(off=n / best["off"], on=n / best["on"], speedup=float(med), q1=float(q1),
+                q3=float(q3), off_bytes=field_bytes(sims["off"]) / n,
+                on_bytes=field_bytes(sims["on"]) / n,
                 same=bool(np.array_equal(sims["off"].state().x, sims["on"].state().x)))
 
 
