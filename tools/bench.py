@@ -1,98 +1,292 @@
 #!/usr/bin/env python3
-"""Throughput benchmark: elastic gas at packing fraction 0.3 (periodic cube).
+"""Scale benchmark: elastic gas at packing fraction 0.3 (periodic cube), N = 1e3 ... 1e6.
 
-Reports sphere-steps per second, collisions per second, the cost of a full step
-against a bare grid pass (drift + grid build + neighbour scan, the same kernels the
-step uses, timed on the same states), and the effect of compiled-out features.
-Writes docs/bench.md (with date, hardware and the command) unless --no-write.
+Per N and precision: sphere-steps/s, collisions/s, simulated seconds per wall second,
+measured memory per sphere (process RSS delta around building and first stepping a
+Simulation; the bytes of its Taichi fields as a cross-check), the cost of each stage of
+one step (drift + walls, grid build, detection, resolve sweeps; a rendered frame with
+--render) against the full step, the full step against a bare grid pass, how the cost
+grows with N (fitted exponent), and the effect of each compiled-out feature.
+Writes docs/bench.md (date, hardware, the command) unless --no-write or --quick.
 
-    python tools/bench.py                       # CPU, N = 1e3, 1e4, 1e5, f64 and f32
+    python tools/bench.py                  # CPU, N = 1e3 ... 1e6, f64 and f32 (~15 min, 2 cores)
+    python tools/bench.py --quick          # N = 1e3, 1e4, short timing, writes nothing
+    python tools/bench.py --render         # also time one rendered frame (needs Vulkan)
     python tools/bench.py --arch cuda --sizes 1000000 10000000
 """
 from __future__ import annotations
 
 import argparse
-import datetime
+import dataclasses
+import gc
 import os
-import platform
 import sys
 import time
+from unittest import mock
 
 import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 import taichi as ti  # noqa: E402
+from taichi.lang.util import to_numpy_type  # noqa: E402
 
 import taichi_spheres as ts  # noqa: E402
+from taichi_spheres import runtime as ts_runtime  # noqa: E402
 from taichi_spheres.builders import gas  # noqa: E402
-from machine import cpu_name, gpu_name  # noqa: E402  (tools/machine.py)
+from taichi_spheres.params import (MOVED, N_COUNTS, OPEN_OVERLAP, REMAINING,  # noqa: E402
+                                   SEP_OVERLAP, VMAX2)
+from taichi_spheres.state import Features  # noqa: E402
+import bench_report  # noqa: E402  (tools/bench_report.py)
+
+DEFAULT_SIZES = [1_000, 10_000, 100_000, 1_000_000]
+QUICK_SIZES = [1_000, 10_000]
+#: stages of one step, in the order Simulation.step runs them; "counters" is the step's
+#: reading back of its counters (Python reads of small fields, one sync each)
+STAGES = ("drift", "grid", "detect", "sweeps", "counters")
+#: one feature compiled in at a time (the scene does not need it: same results)
+FEATURE_FLIPS = (
+    ("gravity", "no gravity (compiled out) vs gravity compiled in, g = 0",
+     dict(gravity_axes=(True, True, True))),
+    ("radii", "equal radii (one constant) vs per-sphere radius field, all equal",
+     dict(equal_radii=False)),
+    ("restitution", "e = 1 (compiled out) vs restitution compiled in, e = 1",
+     dict(elastic=False)),
+)
 
 
-def timed_steps(sim, min_seconds, min_steps):
-    """Alternate, on the same states, a bare grid pass (drift + grid build + neighbour
-    scan, then the state is put back) and a full step; run until both minima are met.
-    Returns (steps, full seconds, bare seconds, collisions)."""
-    motion, grid, contacts = sim._motion, sim._grid, sim._contacts
-    c0 = sim.stats["pair_collisions"]
-    steps, full, bare = 0, 0.0, 0.0
-    while True:
-        h = sim.max_step()
-        st = sim.state()                       # untimed snapshot
-        vmax2 = sim._vmax2
-        ti.sync()
-        t0 = time.perf_counter()
-        sim._params.h[None] = h
+# ---- memory ----
+def rss_bytes() -> int | None:
+    """Resident set size of this process [bytes], from /proc/self/statm (None if absent)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _field_nbytes(field) -> int:
+    """Bytes of one Taichi field [bytes]: elements x components x dtype size."""
+    components = field.n * field.m if isinstance(field, ti.MatrixField) else 1
+    return int(np.prod(field.shape, dtype=np.int64)) * components * \
+        to_numpy_type(field.dtype)().itemsize
+
+
+def field_bytes(sim) -> int:
+    """Bytes of the Taichi fields a Simulation allocated [bytes], computed from their
+    shapes and dtypes (fields held by its state, parameters, motion, grid, contacts)."""
+    seen, total = set(), 0
+    for part in (sim._state, sim._params, sim._motion, sim._grid, sim._contacts):
+        for value in vars(part).values():
+            for item in value if isinstance(value, (list, tuple)) else (value,):
+                if isinstance(item, ti.Field) and id(item) not in seen:
+                    seen.add(id(item))
+                    total += _field_nbytes(item)
+    return total
+
+
+def build(make_sim, warm_steps=3):
+    """Build a Simulation with ``make_sim()`` and take ``warm_steps`` steps (compiling
+    its kernels). Returns (sim, info): compile_s [s] (build + warm-up), rss_build and
+    rss_warm [bytes] (RSS growth after building, and after the warm-up steps too;
+    None without /proc), fields [bytes]."""
+    gc.collect()
+    r0 = rss_bytes()
+    t0 = time.perf_counter()
+    sim = make_sim()
+    r1 = rss_bytes()
+    for _ in range(warm_steps):
+        sim.step(sim.max_step())
+    ti.sync()
+    compile_s = time.perf_counter() - t0
+    r2 = rss_bytes()
+    grow = (lambda r: None if r0 is None else r - r0)
+    return sim, dict(compile_s=compile_s, rss_build=grow(r1), rss_warm=grow(r2),
+                     fields=field_bytes(sim))
+
+
+# ---- stage timing ----
+def _timed(times, stage, fn, *args):
+    """Run fn(*args), ti.sync(), add the wall seconds to times[stage]; return its result."""
+    t0 = time.perf_counter()
+    out = fn(*args)
+    ti.sync()
+    times[stage] += time.perf_counter() - t0
+    return out
+
+
+def staged_step(sim, h, times) -> int:
+    """One step of length h [s] run stage by stage with the kernels and the loop of
+    Simulation.step, with ti.sync() after each stage; adds wall seconds per stage to
+    ``times`` (keys STAGES) and returns the sweeps run. sim.stats is left alone; a
+    re-binning inside the sweep loop counts as grid build and detection."""
+    motion, grid, contacts, params = sim._motion, sim._grid, sim._contacts, sim._params
+    count, vals = params.count, params.vals
+
+    def drift():
+        params.h[None] = h
         motion.drift()
-        grid.build()
+
+    def detect():
         contacts.detect_all()
-        _ = sim._params.count[0]               # the step reads this too
-        ti.sync()
-        bare += time.perf_counter() - t0
-        sim.set_state(st.x, st.v)              # untimed: back to the same state
-        sim._vmax2 = vmax2
+        return count[REMAINING]
+
+    def sweep(pending):
+        contacts.sweep(pending)
+        return count[REMAINING], vals[MOVED] > sim.geometry.slack
+
+    def counters():
+        counts = [count[k] for k in range(N_COUNTS)]
+        return counts, float(vals[SEP_OVERLAP]), float(vals[VMAX2])
+
+    ti.sync()
+    _timed(times, "drift", drift)
+    _timed(times, "grid", grid.build)
+    remaining = _timed(times, "detect", detect)
+    sweeps = 0
+    while remaining > 0 and sweeps < sim.max_sweeps:
+        remaining, moved_far = _timed(times, "sweeps", sweep, remaining)
+        sweeps += 1
+        if remaining > 0 and moved_far:
+            _timed(times, "grid", grid.build)
+            vals[MOVED] = 0
+            remaining = _timed(times, "detect", detect)
+    _timed(times, "counters", counters)
+    if remaining > 0:
+        _timed(times, "counters", lambda: float(vals[OPEN_OVERLAP]))
+    return sweeps
+
+
+def plain_block(sim, min_seconds, min_steps) -> dict:
+    """Consecutive steps of length sim.max_step(), as advance() takes them, until both
+    minima are met. Returns steps, full [s], sim_time [s] (sum of h), collisions, sweeps."""
+    c0, s0 = sim.stats["pair_collisions"], sim.stats["sweeps"]
+    out = dict(steps=0, full=0.0, sim_time=0.0)
+    ti.sync()
+    while out["steps"] < min_steps or out["full"] < min_seconds:
+        h = sim.max_step()
         t0 = time.perf_counter()
         sim.step(h)
         ti.sync()
-        full += time.perf_counter() - t0
-        steps += 1
-        if steps >= min_steps and full >= min_seconds:
-            break
-    return steps, full, bare, sim.stats["pair_collisions"] - c0
+        out["full"] += time.perf_counter() - t0
+        out["sim_time"] += h
+        out["steps"] += 1
+    out["collisions"] = sim.stats["pair_collisions"] - c0
+    out["sweeps"] = sim.stats["sweeps"] - s0
+    return out
 
 
-def measure(scene, arch, precision, min_seconds, blocks=3):
-    """Best of ``blocks`` timed blocks (the least disturbed by other load on a shared
-    machine); each block runs at least 10 steps and min_seconds / blocks seconds."""
-    t0 = time.perf_counter()
-    sim = ts.Simulation(scene, arch=arch, precision=precision)
-    for _ in range(3):                      # compile and warm up
-        sim.step(sim.max_step())
-    compile_s = time.perf_counter() - t0
-    best = None
+def _restore(sim, snapshot, vmax2):
+    """Put a Simulation back to a state() snapshot and its step bound (untimed)."""
+    sim.set_state(snapshot.x, snapshot.v)
+    sim._vmax2 = vmax2
+    ti.sync()
+
+
+def staged_block(sim, min_seconds, min_steps) -> dict:
+    """Alternate, on the same states, a staged pass (staged_step) and a full
+    Simulation.step, each right after the same untimed restore of the state (so both
+    start alike), until both minima are met. Returns steps, full [s], stages {stage: s}."""
+    out = dict(steps=0, full=0.0, stages=dict.fromkeys(STAGES, 0.0))
+    while out["steps"] < min_steps or out["full"] < min_seconds:
+        h = sim.max_step()
+        snapshot, vmax2 = sim.state(), sim._vmax2
+        _restore(sim, snapshot, vmax2)
+        staged_step(sim, h, out["stages"])
+        _restore(sim, snapshot, vmax2)
+        t0 = time.perf_counter()
+        sim.step(h)
+        ti.sync()
+        out["full"] += time.perf_counter() - t0
+        out["steps"] += 1
+    return out
+
+
+def render_ms(sim, scene, frames=3):
+    """Best wall milliseconds of ``frames`` offscreen 640x480 frames of the current state
+    (snapshot copy + GGUI draw + read-back, as `taichi-spheres run` does per frame).
+    Returns (ms, None), or (None, why) when GGUI is unavailable (no Vulkan)."""
+    from taichi_spheres.render import Renderer, RenderUnavailable   # lazily: optional
+    try:
+        renderer = Renderer(scene)
+    except RenderUnavailable as exc:
+        return None, str(exc)
+    try:
+        renderer.frame(sim.state())          # untimed: the first frame builds the pipeline
+        best = float("inf")
+        for _ in range(frames):
+            t0 = time.perf_counter()
+            renderer.frame(sim.state())
+            best = min(best, time.perf_counter() - t0)
+        return best * 1e3, None
+    finally:
+        renderer.close()
+
+
+def measure(scene, arch, precision, min_seconds, blocks=3, render=False) -> dict:
+    """One row: build and warm up, then ``blocks`` plain blocks (throughput) interleaved
+    with ``blocks`` staged blocks (stage costs), each of >= 10 steps and
+    min_seconds / blocks s. Every figure is the fastest of its blocks (the least
+    disturbed by other load on a shared machine). Rates are per wall second, step and
+    stage times in ms per step, memory in bytes."""
+    ts_runtime.ensure(arch, precision)      # a re-initialisation frees memory: not here
+    sim, info = build(lambda: ts.Simulation(scene, arch=arch, precision=precision))
+    plain, staged = [], []
     for _ in range(blocks):
-        steps, secs, bare_total, coll = timed_steps(sim, min_seconds / blocks, 10)
-        row = dict(steps=steps, seconds=secs, bare=bare_total / steps, coll=coll)
-        if best is None or secs / steps < best["seconds"] / best["steps"]:
-            best = row
-    n = scene.n
-    steps, secs, bare, coll = best["steps"], best["seconds"], best["bare"], best["coll"]
-    return dict(n=n, precision=precision, steps=steps, seconds=secs,
-                sphere_steps=n * steps / secs, collisions=coll / secs,
-                step_ms=secs / steps * 1e3, bare_ms=bare * 1e3,
-                ratio=(secs / steps) / bare, compile_s=compile_s,
-                sweeps=sim.stats["sweeps"] / max(sim.stats["steps"], 1))
+        plain.append(plain_block(sim, min_seconds / blocks, 10))
+        staged.append(staged_block(sim, min_seconds / blocks, 10))
+    best = min(plain, key=lambda b: b["full"] / b["steps"])
+    n, steps, secs = scene.n, best["steps"], best["full"]
+    stages_ms = {k: min(b["stages"][k] / b["steps"] for b in staged) * 1e3 for k in STAGES}
+    same_ms = min(b["full"] / b["steps"] for b in staged) * 1e3
+    bare_ms = stages_ms["drift"] + stages_ms["grid"] + stages_ms["detect"]
+    row = dict(n=n, precision=precision, steps=steps, sphere_steps=n * steps / secs,
+               collisions=best["collisions"] / secs, sim_per_wall=best["sim_time"] / secs,
+               step_ms=secs / steps * 1e3, stages_ms=stages_ms, same_ms=same_ms,
+               stage_sum_ms=sum(stages_ms.values()), bare_ms=bare_ms,
+               ratio=same_ms / bare_ms, sweeps=best["sweeps"] / steps, **info)
+    if render:
+        row["render_ms"], row["render_error"] = render_ms(sim, scene)
+    return row
 
 
-def feature_pairs(n):
-    """The same scene with its features compiled out (default) and forced in: the
-    trajectories are identical, so the difference is the cost of the code alone."""
-    base = dict(packing=0.3, seed=0)
-    yield "periodic gas: g = 0, equal radii and masses, e = 1", gas(n, periodic=True, **base)
-    yield "walled gas: g = 0, equal radii and masses, e = 1", gas(n, periodic=False, **base)
+# ---- scaling ----
+def fit_exponent(ns, seconds) -> float:
+    """Least-squares slope of log(seconds per step) against log(N): 1.0 is linear."""
+    return float(np.polyfit(np.log(np.asarray(ns, float)), np.log(np.asarray(seconds)), 1)[0])
 
 
-def step_seconds(sim, steps):
+def scaling(rows) -> dict:
+    """Per precision with >= 2 sizes: (Ns, exponent over all Ns, exponent over N >= 1e4
+    or None when fewer than 2 such sizes)."""
+    out = {}
+    for precision in dict.fromkeys(r["precision"] for r in rows):
+        mine = [r for r in rows if r["precision"] == precision]
+        if len(mine) < 2:
+            continue
+        big = [r for r in mine if r["n"] >= 10_000]
+        fit = (lambda rs: fit_exponent([r["n"] for r in rs], [r["step_ms"] for r in rs]))
+        out[precision] = dict(all=fit(mine), big=fit(big) if len(big) >= 2 else None,
+                              sizes=[r["n"] for r in mine], big_sizes=[r["n"] for r in big])
+    return out
+
+
+# ---- compiled-out features ----
+def simulation_with(scene, arch, precision, flip):
+    """A Simulation of ``scene`` with the Features fields in ``flip`` forced (e.g.
+    {'equal_radii': False}) and every other feature as the scene needs it. The forced
+    features are not used by the scene (g = 0, equal radii, e = 1 are still its values),
+    so results are the same; only the compiled code and the fields differ."""
+    wanted = dataclasses.replace(Features.from_scene(scene), **flip)
+    with mock.patch.object(Features, "from_scene", classmethod(lambda cls, _scene: wanted)):
+        sim = ts.Simulation(scene, arch=arch, precision=precision)
+    if sim.features != wanted:
+        raise RuntimeError("Simulation no longer takes its Features from Features.from_scene:"
+                           " update simulation_with() in tools/bench.py")
+    return sim
+
+
+def step_seconds(sim, steps) -> float:
     """Mean wall seconds per step over ``steps`` steps."""
     ti.sync()
     t0 = time.perf_counter()
@@ -102,98 +296,113 @@ def step_seconds(sim, steps):
     return (time.perf_counter() - t0) / steps
 
 
-def compare_features(scene, arch, precision, repeats=5, steps=20):
-    """Alternate blocks of steps of the compiled-out and compiled-in builds of one scene
-    (same states, so the same work) and keep the best block of each."""
-    out = {}
-    sims = {flag: ts.Simulation(scene, arch=arch, precision=precision, compile_all=flag)
-            for flag in (False, True)}
+def compare_features(make_off, make_on, repeats=5, steps=20) -> dict:
+    """Pairs of adjacent blocks of ``steps`` steps of two builds of one scene (compiled
+    out: make_off(), compiled in: make_on()) from the same states, in alternating order.
+    Returns off/on: best sphere-steps/s of each; speedup: median over the pairs of
+    (compiled-in time / compiled-out time), with its quartiles (q1, q3), which other
+    load disturbs less than a ratio of two bests; off_bytes/on_bytes: field bytes per
+    sphere; same: whether the final states are identical."""
+    sims = {"off": make_off(), "on": make_on()}
     for sim in sims.values():
         sim.step(sim.max_step())
-    times = {False: float("inf"), True: float("inf")}
-    for _ in range(repeats):
-        st = sims[False].state()
-        for flag, sim in sims.items():
-            sim.set_state(st.x, st.v)
-            times[flag] = min(times[flag], step_seconds(sim, steps))
-    same = np.array_equal(sims[False].state().x, sims[True].state().x)
-    for flag in (False, True):
-        out[flag] = scene.n / times[flag]
-    return out[False], out[True], same
+    best, ratios = dict.fromkeys(sims, float("inf")), []
+    for rep in range(repeats):
+        st = sims["off"].state()
+        secs = {}
+        for key in (("off", "on") if rep % 2 == 0 else ("on", "off")):
+            sims[key].set_state(st.x, st.v)
+            secs[key] = step_seconds(sims[key], steps)
+            best[key] = min(best[key], secs[key])
+        ratios.append(secs["on"] / secs["off"])
+    n = sims["off"].n
+    q1, med, q3 = np.percentile(ratios, [25, 50, 75])
+    return dict(off=n / best["off"], on=n / best["on"], speedup=float(med), q1=float(q1),
+                q3=float(q3), off_bytes=field_bytes(sims["off"]) / n,
+                on_bytes=field_bytes(sims["on"]) / n,
+                same=bool(np.array_equal(sims["off"].state().x, sims["on"].state().x)))
 
 
-def main():
+def feature_comparisons(n, arch, precision, repeats, steps):
+    """(label, result) for every feature compiled in at once (compile_all: periodic and
+    walled gas), then each feature of FEATURE_FLIPS alone (periodic gas)."""
+    periodic = gas(n, packing=0.3, periodic=True, seed=0)
+    walled = gas(n, packing=0.3, periodic=False, seed=0)
+    cases = [(f"all at once (compile_all), {kind} gas", scene,
+              lambda s: ts.Simulation(s, arch=arch, precision=precision, compile_all=True))
+             for kind, scene in (("periodic", periodic), ("walled", walled))]
+    cases += [(label, periodic, lambda s, f=flip: simulation_with(s, arch, precision, f))
+              for _key, label, flip in FEATURE_FLIPS]
+    for label, scene, make_on in cases:
+        res = compare_features(lambda: ts.Simulation(scene, arch=arch, precision=precision),
+                               lambda: make_on(scene), repeats, steps)
+        yield label, res
+
+
+# ---- command line ----
+def parse_args(argv=None):
+    """Command-line options; --quick fills in what was not given and implies --no-write."""
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--arch", default="cpu")
-    ap.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000])
+    ap.add_argument("--sizes", type=int, nargs="+", default=None,
+                    help=f"sphere counts (default {DEFAULT_SIZES}; --quick: {QUICK_SIZES})")
     ap.add_argument("--precisions", nargs="+", default=None)
     ap.add_argument("--feature-n", type=int, default=10000,
                     help="sphere count for the feature comparison (0: skip)")
-    ap.add_argument("--seconds", type=float, default=4.5,
-                    help="minimum timed seconds per row (split into 3 blocks)")
+    ap.add_argument("--seconds", type=float, default=None,
+                    help="minimum timed seconds per row, split into 3 blocks (default 4.5; "
+                         "--quick: 1)")
+    ap.add_argument("--render", action="store_true",
+                    help="also time one rendered 640x480 frame per row (needs Vulkan)")
+    ap.add_argument("--quick", action="store_true",
+                    help="development run: N up to 1e4, short timing, writes nothing")
     ap.add_argument("--out", default=os.path.join("docs", "bench.md"))
     ap.add_argument("--no-write", action="store_true")
-    args = ap.parse_args()
-    precisions = args.precisions or (["f32"] if args.arch in ("vulkan", "metal") else ["f64", "f32"])
+    args = ap.parse_args(argv)
+    args.sizes = args.sizes or (QUICK_SIZES if args.quick else DEFAULT_SIZES)
+    args.seconds = args.seconds or (1.0 if args.quick else 4.5)
+    args.feature_repeats, args.feature_steps = (3, 10) if args.quick else (15, 20)
+    args.no_write = args.no_write or args.quick
+    args.precisions = args.precisions or (["f32"] if args.arch in ("vulkan", "metal")
+                                          else ["f64", "f32"])
+    return args
 
-    rows = []
-    for precision in precisions:
+
+def run_rows(args) -> list:
+    """Throughput, memory and stage rows for every precision and size (printed as they
+    come); rendering is dropped with a message once GGUI proves unavailable."""
+    rows, render = [], args.render
+    for precision in args.precisions:
         for n in args.sizes:
-            r = measure(gas(n, packing=0.3, periodic=True, seed=0), args.arch, precision,
-                        args.seconds)
-            rows.append(r)
-            print(f"N={n:>9} {precision}: {r['sphere_steps']:.3e} sphere-steps/s, "
-                  f"{r['collisions']:.3e} collisions/s, step {r['step_ms']:.3f} ms, "
-                  f"bare pass {r['bare_ms']:.3f} ms, ratio {r['ratio']:.2f}", flush=True)
+            scene = gas(n, packing=0.3, periodic=True, seed=0)
+            row = measure(scene, args.arch, precision, args.seconds, render=render)
+            if row.get("render_error"):
+                print(f"render skipped: {row['render_error']}", flush=True)
+                render = False
+            rows.append(row)
+            print(bench_report.row_line(row), flush=True)
+    return rows
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    load_start = os.getloadavg()[0]
+    runtime = ts.Simulation(gas(8, packing=0.01), arch=args.arch,
+                            precision=args.precisions[0]).runtime
+    baseline = rss_bytes()
+    rows = run_rows(args)
+    fits = scaling(rows)
+    for precision, fit in fits.items():
+        print(bench_report.fit_line(precision, fit), flush=True)
     feats = []
     if args.feature_n:
-        for label, scene in feature_pairs(args.feature_n):
-            off, on, same = compare_features(scene, args.arch, precisions[0])
-            feats.append((label, off, on, same))
-            print(f"{label}: {off:.3e} compiled out, {on:.3e} compiled in, "
-                  f"speed-up {off / on:.2f}, identical states {same}", flush=True)
-
-    rt = ts.Simulation(gas(8, packing=0.01), arch=args.arch, precision=precisions[0]).runtime
-    hw = gpu_name() if rt.actual == "cuda" else None
-    hardware = f"{hw} (GPU)" if hw else f"{cpu_name()}, {os.cpu_count()} cores"
-    cmd = "python tools/bench.py " + " ".join(sys.argv[1:])
-    lines = [
-        "# Benchmark: elastic hard-sphere gas",
-        "",
-        f"Generated {datetime.date.today().isoformat()} by `{cmd.strip()}` on {hardware}, "
-        f"arch {rt.arch} (Taichi {'.'.join(map(str, ti.__version__))}, {rt.actual}), Python "
-        f"{platform.python_version()}.",
-        "",
-        "Scene: N spheres of radius 0.5 m on a jittered lattice in a periodic cube at packing "
-        "fraction 0.3, Gaussian velocities (rms 1 m/s per component), no gravity, e = 1; "
-        "default step_fraction 0.1. A *sphere-step* is one sphere advanced by one adaptive "
-        "step. *Bare pass* = drift + grid build + neighbour scan (the same kernels, timed on "
-        "the same states as the steps); *ratio* = full step / bare pass. Each row is the "
-        "best of 3 timed blocks: this is a shared VM whose speed varies by up to ±25 % "
-        "from minute to minute.",
-        "",
-        "| N | precision | sphere-steps/s | collisions/s | ms/step | bare pass ms | ratio | "
-        "sweeps/step | compile+warm-up s |",
-        "|---:|:---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    for r in rows:
-        lines.append(f"| {r['n']:,} | {r['precision']} | {r['sphere_steps']:.3g} | "
-                     f"{r['collisions']:.3g} | {r['step_ms']:.3f} | {r['bare_ms']:.3f} | "
-                     f"{r['ratio']:.2f} | {r['sweeps']:.2f} | {r['compile_s']:.1f} |")
-    if feats:
-        lines += ["", f"## Compiled-out features (N = {args.feature_n:,}, {precisions[0]})", "",
-                  "The same scene run twice: with gravity, per-sphere radius and mass fields "
-                  "and restitution compiled out (what the scene needs: `ti.static` flags) "
-                  "and with all of them compiled in (`Simulation(..., compile_all=True)`, "
-                  "g = 0, equal values, e = 1). Both runs compute identical states; the "
-                  "best of 5 blocks of 20 steps is kept for each.", "",
-                  "| scene | compiled out, sphere-steps/s | compiled in | speed-up | "
-                  "identical states |", "|:---|---:|---:|---:|:---:|"]
-        for label, off, on, same in feats:
-            lines.append(f"| {label} | {off:.3g} | {on:.3g} | {off / on:.2f} | "
-                         f"{'yes' if same else 'no'} |")
-    text = "\n".join(lines) + "\n"
+        for label, res in feature_comparisons(args.feature_n, args.arch, args.precisions[0],
+                                              args.feature_repeats, args.feature_steps):
+            feats.append((label, res))
+            print(bench_report.feature_line(label, res), flush=True)
+    loads = (load_start, os.getloadavg()[0])
+    text = bench_report.markdown(args, runtime, baseline, rows, fits, feats, loads)
     print(text)
     if not args.no_write:
         os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
