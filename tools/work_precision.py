@@ -25,6 +25,19 @@ or, for the bouncing ball, from the closed form):
   bounce     one ball dropped from h0 = 1 m (centre height above its floor contact),
              e_wall = 0.8: the engine is advanced to each analytic apex time and
              max_k |z_engine - z_apex,k| / h0 with z_apex,k - r = e^{2k} h0.
+  pressure   periodic elastic gas, 125 spheres, packing 0.25, no gravity, to t = 1 s
+             (about 7 pair collisions per sphere): pressure from the collisional
+             virial, P = (N k T + W / (3 t)) / V [Pa], N k T = (2/3) KE [J] (constant
+             for e = 1), W = sum over pair collisions of r_ij . dp_i at contact
+             [kg m^2/s = J s] (``ref.virial``, ``sim.stats["virial"]``):
+             |P_engine - P_ref| / P_ref.  The Carnahan-Starling value is printed for
+             information only.  Until the engine has ``stats["virial"]`` the case
+             reports "engine virial not available" (timings only).
+
+Reference vs engine speed (``--speed-budget``): the exact reference's wall time on
+each case above next to the engine's, and on denser, larger periodic gases
+(packing 0.35, N = 125 ... 2000, short horizon) with the reference stopped at a wall
+budget: reference and engine seconds per simulated second.
 
 Timing excludes Taichi compilation: each Simulation is first warmed up on itself
 (advanced until it has done pair and wall collisions, or a few hundred steps), then
@@ -32,6 +45,9 @@ restored to its t = 0 checkpoint and its ``sim_seconds`` reset to zero.
 
     python tools/work_precision.py            # ~ a few minutes on 2 CPU cores
     python tools/work_precision.py --quick    # ~ 1 minute
+
+The plot docs/work_precision.png (needs the ``plot`` extra: ``pip install -e .[plot]``)
+is error against engine seconds, log-log, one colour per case, f64 solid, f32 dashed.
 """
 from __future__ import annotations
 
@@ -109,12 +125,14 @@ def bounce_apexes():
 def make_sim(scene, precision, fraction):
     sim = ts.Simulation(scene, arch="cpu", precision=precision, step_fraction=fraction)
     ckpt = sim.checkpoint()
+    walls = not all(scene.periodic)
     # warm-up: compile every kernel the run will need (sweep kernels compile on the
     # first collision), then go back to t = 0
     for _ in range(400):
         sim.advance(sim.max_step() * 10)
         st = sim.stats
-        if (st["pair_collisions"] > 0 or scene.n < 2) and st["wall_collisions"] > 0:
+        if (st["pair_collisions"] > 0 or scene.n < 2) and (st["wall_collisions"] > 0
+                                                           or not walls):
             break
     sim.restore(ckpt)
     sim.sim_seconds = 0.0
@@ -128,16 +146,21 @@ def timed_reference(scene, t):
     return ref, time.perf_counter() - t0
 
 
+def perturbed(scene, eps, scale):
+    """The scene with sphere 0 moved by eps * scale [m] along x."""
+    x = np.array(scene.x, dtype=float)
+    x[0, 0] += eps * scale
+    return ts.Scene.from_arrays(x, scene.v, scene.radius, mass=scene.mass,
+                                box=(tuple(scene.box_lo), tuple(scene.box_hi)),
+                                periodic=tuple(scene.periodic), gravity=tuple(scene.gravity),
+                                restitution=scene.restitution,
+                                wall_restitution=scene.wall_restitution)
+
+
 def chaos_check(scene, t, scale, eps=1e-12):
     """max |x_ref - x_ref'| / scale at t, where ' has sphere 0 moved by eps * scale:
     how much the dynamics itself amplifies a round-off-sized perturbation."""
-    x = np.array(scene.x, dtype=float)
-    x[0, 0] += eps * scale
-    other = ts.Scene.from_arrays(x, scene.v, scene.radius, mass=scene.mass,
-                                 box=(tuple(scene.box_lo), tuple(scene.box_hi)),
-                                 periodic=tuple(scene.periodic), gravity=tuple(scene.gravity),
-                                 restitution=scene.restitution,
-                                 wall_restitution=scene.wall_restitution)
+    other = perturbed(scene, eps, scale)
     a = EventDrivenReference(scene)
     a.advance_to(t)
     b = EventDrivenReference(other)
@@ -241,6 +264,194 @@ def run_bounce(settings):
     return case
 
 
+PRESSURE_N = 125
+PRESSURE_PACKING = 0.25
+PRESSURE_T = 1.0
+
+
+def scene_pressure():
+    return gas(PRESSURE_N, packing=PRESSURE_PACKING, periodic=True, seed=0)
+
+
+def kinetic_energy(st):
+    """Kinetic energy [J] of a State."""
+    return 0.5 * float(np.sum(st.mass[:, None] * st.v ** 2))
+
+
+def virial_pressure(scene, ke, virial, t):
+    """Pressure [Pa] of an elastic gas: (N k T + W / (3 t)) / V with N k T = (2/3) KE,
+    ke the kinetic energy [J], virial W the sum over the pair collisions of a run of
+    t [s] of r_ij . dp_i [kg m^2/s], V the box volume [m^3]."""
+    volume = float(np.prod(scene.box_size))
+    return (2.0 / 3.0 * ke + virial / (3.0 * t)) / volume
+
+
+def carnahan_starling(scene, ke):
+    """Carnahan-Starling pressure [Pa] at the scene's packing fraction and the
+    temperature given by the kinetic energy ke [J]: n k T (1+eta+eta^2-eta^3)/(1-eta)^3."""
+    volume = float(np.prod(scene.box_size))
+    eta = float(np.sum(4.0 / 3.0 * math.pi * np.asarray(scene.radius) ** 3)) / volume
+    return 2.0 / 3.0 * ke / volume * (1 + eta + eta ** 2 - eta ** 3) / (1 - eta) ** 3
+
+
+NO_VIRIAL = "engine virial not available"
+
+
+def run_pressure(settings):
+    T = PRESSURE_T
+    case = Case("pressure", f"Virial pressure, periodic elastic gas N={PRESSURE_N}, "
+                f"packing {PRESSURE_PACKING:g}, t = {T:g} s", "|P - P_ref| / P_ref")
+    scene = scene_pressure()
+    ref, case.ref_seconds = timed_reference(scene, T)
+    ke_ref = kinetic_energy(ref.state())
+    p_ref = virial_pressure(scene, ke_ref, ref.virial, T)
+    p_cs = carnahan_starling(scene, ke_ref)
+    other = EventDrivenReference(perturbed(scene, 1e-12, float(scene.box_size[0])))
+    other.advance_to(T)
+    p_other = virial_pressure(scene, kinetic_energy(other.state()), other.virial, T)
+    st = ref.stats
+    z_ref = p_ref / virial_pressure(scene, ke_ref, 0.0, T)
+    case.note = (f"reference: {st['pair_collisions']} pair collisions "
+                 f"({2 * st['pair_collisions'] / scene.n:.1f} per sphere), P_ref = "
+                 f"{p_ref:.6g} Pa, P_ref V / N k T = {z_ref:.4f}; "
+                 f"Carnahan-Starling (information only, equilibrium, N -> inf): "
+                 f"{p_cs:.6g} Pa ({p_ref / p_cs - 1:+.1%} from P_ref; this run starts "
+                 f"from a lattice and lasts a few collision times); chaos check: a 1e-12 "
+                 f"perturbation of the start changes P_ref by "
+                 f"{abs(p_other - p_ref) / p_ref:.1e}")
+    for prec, f in settings:
+        sim = make_sim(scene, prec, f)
+        w0 = sim.stats.get("virial", 0.0)
+        sim.advance_to(T)
+        stats = sim.stats
+        pairs = f"pairs {stats['pair_collisions']}"
+        if "virial" not in stats:
+            row = dict(precision=prec, fraction=f, seconds=sim.sim_seconds,
+                       error=math.nan, extra=f"{NO_VIRIAL}; {pairs}")
+        else:
+            p = virial_pressure(scene, kinetic_energy(sim.state()), stats["virial"] - w0, T)
+            row = dict(precision=prec, fraction=f, seconds=sim.sim_seconds,
+                       error=abs(p - p_ref) / p_ref, extra=f"P {p:.6g} Pa, {pairs}")
+        case.rows.append(row)
+        report(case, row)
+    return case
+
+
+# ---- reference vs engine speed ----
+SPEED_PACKING = 0.35
+SPEED_SIZES = (125, 500, 2000)
+SPEED_T = 0.5
+SPEED_FRACTIONS = (0.1, 0.003)
+
+
+def reference_rate(scene, horizon, budget):
+    """Run the reference towards ``horizon`` [s] in steps of horizon/200, stopping once
+    ``budget`` wall seconds have been spent advancing. Returns (construction wall
+    seconds, advance wall seconds, simulated seconds reached, pair collisions)."""
+    t0 = time.perf_counter()
+    ref = EventDrivenReference(scene)
+    build = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    chunk = horizon / 200.0
+    while ref.time < horizon and time.perf_counter() - t1 < budget:
+        ref.advance_to(min(ref.time + chunk, horizon))
+    return build, time.perf_counter() - t1, ref
+
+
+def periodic_x_error(a, b, side):
+    """max |a - b| / side over positions [m] on a periodic cube of that side [m]."""
+    d = a - b
+    d -= side * np.round(d / side)
+    return float(np.abs(d).max() / side)
+
+
+def run_speed(sizes, horizon, budget):
+    """Dense periodic elastic gases (packing SPEED_PACKING): the reference's and the
+    engine's (f64, each of SPEED_FRACTIONS) wall seconds per simulated second, and the
+    engine's max |x - x_ref| / box side at the time the reference reached."""
+    rows = []
+    for n in sizes:
+        scene = gas(n, packing=SPEED_PACKING, periodic=True, seed=0)
+        build, run, ref = reference_rate(scene, horizon, budget)
+        reached, pairs = ref.time, ref.stats["pair_collisions"]
+        side = float(scene.box_size[0])
+        row = dict(n=n, ref_build=build, ref_run=run, ref_t=reached, ref_pairs=pairs,
+                   ref_rate=run / reached if reached > 0 else math.inf, engine={})
+        for f in SPEED_FRACTIONS:
+            sim = make_sim(scene, "f64", f)
+            err = None
+            if reached > 0:
+                sim.advance_to(reached)
+                err = periodic_x_error(sim.state().x, ref.state().x, side)
+            sim.advance_to(horizon)
+            row["engine"][f] = (sim.sim_seconds / horizon, err)
+        rows.append(row)
+        eng = ", ".join(f"engine {f:g}: {r:.3g} s/s (x err {e})"
+                        for f, (r, e) in row["engine"].items())
+        print(f"  speed N={n}: reference {row['ref_rate']:.3g} s/s (reached t = {reached:.3g} "
+              f"in {run:.1f} s, {pairs} pairs, built in {build:.2f} s); {eng}", flush=True)
+    return rows
+
+
+def cheapest_below(case, thr):
+    """The f64 row of the lowest engine seconds with error < thr, or None."""
+    ok = [r for r in case.rows if r["precision"] == "f64" and r["error"] < thr]
+    return min(ok, key=lambda r: r["seconds"]) if ok else None
+
+
+def speed_lines(cases, speed, horizon, budget):
+    """Markdown lines of the 'Reference vs engine speed' section."""
+    lines = ["", "## Reference vs engine speed", "",
+             "Wall seconds on this machine, f64. The reference's time includes building "
+             "its event tables; the engine's excludes compilation.", "",
+             "Same cases as above: the reference against the engine at the cheapest "
+             "setting that reaches 1e-6 (the reference is exact).", "",
+             "| case | reference s | engine s (cheapest error < 1e-6) | at step_fraction | "
+             "faster |", "|---|---|---|---|---|"]
+    for c in cases:
+        if c.ref_seconds is None:
+            continue
+        best = cheapest_below(c, 1e-6)
+        if unavailable(c):
+            fastest = min(r["seconds"] for r in c.rows if r["precision"] == "f64")
+            lines.append(f"| {c.name} | {c.ref_seconds:.3f} | {NO_VIRIAL} (fastest run "
+                         f"{fastest:.3f}) | - | - |")
+            continue
+        if best is None:
+            lines.append(f"| {c.name} | {c.ref_seconds:.3f} | not reached | - | reference |")
+            continue
+        a, b = c.ref_seconds, best["seconds"]
+        faster = "reference" if a < b else "engine"
+        lines.append(f"| {c.name} | {a:.3f} | {b:.3f} | {best['fraction']:g} | "
+                     f"{faster} ({max(a, b) / min(a, b):.1f}x) |")
+    if not speed:
+        return lines
+    fr = SPEED_FRACTIONS
+    lines += ["", f"Denser, larger gases: periodic elastic gas at packing {SPEED_PACKING:g} "
+              f"(`gas(N, packing={SPEED_PACKING:g}, periodic=True, seed=0)`), engine run to "
+              f"t = {horizon:g} s, reference stopped after {budget:g} wall seconds of "
+              "advancing (or at the same t). Seconds per simulated second; the reference "
+              "builds its N x N event table first ('build s'). step_fraction "
+              f"{fr[0]:g} is the default (statistics), {fr[-1]:g} the setting the dilute "
+              "cases above need to follow the exact trajectories over ~5 collisions per "
+              "sphere; 'x err' is the engine's max |x - x_ref| / box side at the time "
+              "the reference reached.", "",
+             "| N | reference build s | reference s / sim s | reference reached t | "
+             "reference pairs | " + " | ".join(f"engine {f:g} s / sim s" for f in fr)
+             + " | reference / engine " + " | reference / engine ".join(f"{f:g}" for f in fr)
+             + " | " + " | ".join(f"x err {f:g}" for f in fr) + " |",
+             "|---:|---:|---:|---:|---:|" + "---:|" * (3 * len(fr))]
+    for r in speed:
+        eng = [r["engine"][f][0] for f in fr]
+        errs = ["-" if r["engine"][f][1] is None else f"{r['engine'][f][1]:.1e}" for f in fr]
+        lines.append(f"| {r['n']} | {r['ref_build']:.2f} | {r['ref_rate']:.3g} | "
+                     f"{r['ref_t']:.3g} | {r['ref_pairs']} | "
+                     + " | ".join(f"{e:.3g}" for e in eng) + " | "
+                     + " | ".join(f"{r['ref_rate'] / e:.3g}" for e in eng) + " | "
+                     + " | ".join(errs) + " |")
+    return lines
+
+
 def scene_state(scene):
     return ts.State(x=np.asarray(scene.x, float), v=np.asarray(scene.v, float),
                     radius=np.asarray(scene.radius, float), mass=np.asarray(scene.mass, float),
@@ -253,7 +464,14 @@ def report(case, row):
 
 
 # ---- summary ----
+def unavailable(case):
+    """True when a case has no engine error to show (engine virial not available)."""
+    return any(math.isnan(r["error"]) for r in case.rows if r["precision"] == "f64")
+
+
 def first_below(case, thr):
+    if unavailable(case):
+        return NO_VIRIAL
     for r in case.rows:
         if r["precision"] == "f64" and r["error"] < thr:
             return f"{r['fraction']:g}"
@@ -266,6 +484,8 @@ ROUNDOFF = 1e-10
 
 
 def monotone_note(case):
+    if unavailable(case):
+        return NO_VIRIAL
     f64 = [r for r in case.rows if r["precision"] == "f64"]
     pairs = [(a, b) for a, b in zip(f64, f64[1:]) if b["error"] >= a["error"]]
     bad = [(a, b) for a, b in pairs if b["error"] > ROUNDOFF]
@@ -306,13 +526,31 @@ NOTES = """
   on the parabola, so apex heights are exact to round-off (f64) or ~1e-6 (f32) at every
   step_fraction. It confirms the wall rewind, not the step control.
 - **f32** rows are limited by f32 round-off (~1e-7) amplified by the collisions.
-- **The exact reference is as fast as or faster than the engine here** (dilute gas,
-  N = 64, a few hundred events): the engine's cost scales with steps, the reference's
-  with events (O(N) per event); the engine is for large N.
+- **pressure** (periodic elastic gas, N = 125, packing 0.25, 1 s, ~7 collisions per
+  sphere): the reference gives P V / N k T = 3.069, Carnahan-Starling 3.074 (-0.2 %;
+  information only: a lattice start, a few collision times, finite N). The virial
+  pressure is a robust statistic: a 1e-12 perturbation of the start changes it by
+  ~3e-13. Engine rows show "engine virial not available" where the engine has no
+  ``stats["virial"]`` yet (timings only).
+- **Reference vs engine speed.** The reference's cost per event grows with N (an
+  O(N) update of the rows of the two spheres and an O(N^2) argmin over the pair
+  table), and the events per simulated second grow with N, so at fixed packing its
+  seconds per simulated second grow roughly as N^2 to N^3 (0.5-0.9 s at N = 125,
+  3-8 s at N = 500, 60-100 s at N = 2000, packing 0.35, across runs on this VM),
+  while the engine's grow slowly (its small-N cost is kernel launches). The
+  reference is faster on the dilute N = 64 cases whenever they need step_fraction
+  0.03 or finer, and it is about even with the engine at 0.003 at N = 125 (packing
+  0.35; either is ahead by up to 1.2x depending on the run); from N = 500 the engine
+  is faster even at 0.003 (about 4x at N = 500, about 40x at N = 2000) and about 30x,
+  80x and 700x faster at the default 0.1 (N = 125, 500, 2000), which is what
+  statistics need. The dense gases are followed to round-off at 0.003 (x err
+  column); at 0.1 they diverge (collisions missed or reordered), as in the dilute
+  cases.
 """
 
 
-def write_markdown(path, cases, command, elapsed):
+def write_markdown(path, cases, command, elapsed, speed=None, speed_args=None,
+                   png=None):
     now = datetime.datetime.now().strftime("%Y-%m-%d %H:%M")
     lines = ["# Work-precision", "",
              f"- date: {now}",
@@ -324,8 +562,14 @@ def write_markdown(path, cases, command, elapsed):
              "has done pair and wall collisions (compiling every kernel the run uses), "
              "then restored to its t = 0 checkpoint with `sim_seconds` reset. "
              "\"ref s\" is the exact event-driven numpy reference's own run time for "
-             "the same case (construction + advance).", "",
-             "## Summary", "",
+             "the same case (construction + advance).", ""]
+    if png:
+        lines += [f"![error against engine seconds]({os.path.basename(png)})", "",
+                  f"`{os.path.basename(png)}`: error against engine seconds, log-log, made by "
+                  f"the command above (`{command}`); one colour per case, f64 solid with "
+                  "circles, f32 dashed with squares; errors of exactly 0 are drawn at 1e-17.",
+                  ""]
+    lines += ["## Summary", "",
              "| case | ref s | error < 1e-6 first at step_fraction | error < 1e-9 first at "
              "step_fraction | behaviour |",
              "|---|---|---|---|---|"]
@@ -336,14 +580,17 @@ def write_markdown(path, cases, command, elapsed):
     lines.append("")
     lines.append("(thresholds and the behaviour column use the f64 rows only; an increase "
                  f"that stays below {ROUNDOFF:g} is listed as round-off growth)")
+    if speed is not None:
+        lines += speed_lines(cases, speed, *speed_args)
     lines += ["", "## Notes (on the run recorded here)", "", NOTES.strip()]
     for c in cases:
         lines += ["", f"## {c.name}: {c.title}", "", f"Error: {c.metric}. {c.note}.", "",
                   "| precision | step_fraction | seconds | error | details |",
                   "|---|---|---|---|---|"]
         for r in c.rows:
+            err = "n/a" if math.isnan(r["error"]) else f"{r['error']:.2e}"
             lines.append(f"| {r['precision']} | {r['fraction']:g} | {r['seconds']:.3f} | "
-                         f"{r['error']:.2e} | {r['extra']} |")
+                         f"{err} | {r['extra']} |")
         if c.ref_seconds is not None:
             lines.append(f"| reference | exact | {c.ref_seconds:.3f} | 0 | event-driven numpy |")
     with open(path, "w") as fh:
@@ -357,14 +604,24 @@ def write_plot(path, cases):
         import matplotlib.pyplot as plt
     except Exception:
         return False
-    fig, ax = plt.subplots(figsize=(6, 4.5))
-    for c in cases:
-        rows = [r for r in c.rows if r["precision"] == "f64"]
-        ax.loglog([max(r["seconds"], 1e-4) for r in rows],
-                  [max(r["error"], 1e-17) for r in rows], "o-", label=c.name)
-    ax.set_xlabel("engine seconds (sim_seconds)")
-    ax.set_ylabel("error")
-    ax.legend()
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for k, c in enumerate(cases):
+        colour = f"C{k}"
+        for prec, style in (("f64", "o-"), ("f32", "s--")):
+            rows = [r for r in c.rows if r["precision"] == prec and not math.isnan(r["error"])]
+            if not rows:
+                continue
+            ax.loglog([max(r["seconds"], 1e-4) for r in rows],
+                      [max(r["error"], 1e-17) for r in rows], style, color=colour,
+                      label=f"{c.name} {prec}", mfc="none" if prec == "f32" else colour)
+    missing = [c.name for c in cases if unavailable(c)]
+    if missing:
+        ax.text(0.02, 0.02, f"{', '.join(missing)}: {NO_VIRIAL}", transform=ax.transAxes,
+                fontsize=8)
+    ax.set_xlabel("engine seconds (Simulation.sim_seconds)")
+    ax.set_ylabel("error (see each case)")
+    ax.set_title("work-precision: engine vs exact answers (cpu)")
+    ax.legend(fontsize=8, ncol=2)
     ax.grid(True, which="both", alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -376,8 +633,13 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="fewer settings, shorter runs")
     ap.add_argument("--fractions", type=float, nargs="+", default=None)
     ap.add_argument("--no-f32", action="store_true", help="skip the f32 rows")
-    ap.add_argument("--cases", nargs="+", default=["traj", "gravity", "counts", "bounce"],
-                    choices=["traj", "gravity", "counts", "bounce"])
+    names = ["traj", "gravity", "counts", "bounce", "pressure"]
+    ap.add_argument("--cases", nargs="+", default=names, choices=names)
+    ap.add_argument("--speed-sizes", type=int, nargs="*", default=None,
+                    help=f"N of the reference-vs-engine speed gases [{SPEED_SIZES}; "
+                         "--quick: the first two]; none given: skip")
+    ap.add_argument("--speed-budget", type=float, default=None,
+                    help="wall seconds the reference may advance per speed gas [40; --quick 5]")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "work_precision.md"))
     ap.add_argument("--no-write", action="store_true")
     args = ap.parse_args(argv)
@@ -387,13 +649,21 @@ def main(argv=None):
     command = "python tools/work_precision.py" + (" " + " ".join(sys.argv[1:])
                                                    if argv is None and sys.argv[1:] else "")
     t_start = time.perf_counter()
+    sizes = args.speed_sizes if args.speed_sizes is not None else \
+        (SPEED_SIZES[:2] if args.quick else SPEED_SIZES)
+    budget = args.speed_budget or (5.0 if args.quick else 40.0)
     runners = dict(traj=run_traj, gravity=run_gravity,
-                   counts=lambda s: run_counts(s, counts_T), bounce=run_bounce)
+                   counts=lambda s: run_counts(s, counts_T), bounce=run_bounce,
+                   pressure=run_pressure)
     # all f64 runs first: switching precision re-initialises Taichi
     cases = []
     for name in args.cases:
         print(f"{name}:", flush=True)
         cases.append(runners[name]([("f64", f) for f in fractions]))
+    speed = None
+    if sizes:
+        print("reference vs engine speed:", flush=True)
+        speed = run_speed(sizes, SPEED_T, budget)
     if f32:
         for name, c in zip(args.cases, cases):
             print(f"{name} (f32):", flush=True)
@@ -405,11 +675,15 @@ def main(argv=None):
         print(f"  {c.name}: ref {c.ref_seconds}, <1e-6 at {first_below(c, 1e-6)}, "
               f"<1e-9 at {first_below(c, 1e-9)}; {monotone_note(c)}")
     if not args.no_write:
-        write_markdown(args.out, cases, command, elapsed)
-        print(f"wrote {args.out}")
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
         png = os.path.splitext(args.out)[0] + ".png"
         if write_plot(png, cases):
             print(f"wrote {png}")
+        else:
+            png = None
+            print("matplotlib not importable: no plot (pip install -e .[plot])")
+        write_markdown(args.out, cases, command, elapsed, speed, (SPEED_T, budget), png)
+        print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":
