@@ -43,6 +43,11 @@ SERIAL_RESOLVE_PAIRS = 50_000
 #: spheres, at 60 degrees, still does).
 SUPPORT_COS = 0.4
 
+#: Approaches slower than this fraction of the rest speed are not collided (rest rule
+#: only): repeated e = 0 collisions in a resting pile shrink the residual approach
+#: geometrically and would otherwise go on until round-off.
+REST_TOLERANCE = 0.03
+
 #: Collapse rule (inelastic pairs only): a sphere's collisions in one step from this
 #: one on are perfectly inelastic in the normal direction (a time-stepped stand-in
 #: for the TC model of Luding & McNamara 1998: collisions closer in time than
@@ -168,7 +173,13 @@ class Contacts:
     @ti.func
     def approaching(self, dd, du, uu):
         """d.u < 0 beyond round-off (relative to |d||u|)."""
-        return du < -ti.cast(ti.static(self.approach_eps), self.real) * ti.sqrt(dd * uu)
+        out = du < -ti.cast(ti.static(self.approach_eps), self.real) * ti.sqrt(dd * uu)
+        if ti.static(self.f.rest_rule):
+            # resting contacts: an approach slower than REST_TOLERANCE x the rest
+            # speed is left alone (it closes the gap by less than that speed x h per
+            # step; gravity makes it faster by g h in the next step)
+            out = out and du * du > ti.static(REST_TOLERANCE ** 2) * self.params.rest_speed[None] ** 2 * dd
+        return out
 
     @ti.func
     def contact_time(self, d, u, sigma):

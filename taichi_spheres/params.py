@@ -29,7 +29,7 @@ class StepParams:
     vals: (N_VALS,) real — max relative overlap of separating pairs, of
         approaching pairs in the last detection, max |v|^2, max distance moved;
         kinetic energy removed by pair restitution, by wall restitution, by the
-        rest rule [J]; collisional virial sum r_ij . dp_i [J] (all in this step).
+        rest rule [J]; collisional virial sum r_ij . dp_i [J s] (all in this step).
     """
 
     def __init__(self, scene, real, rest_speed=0.0):

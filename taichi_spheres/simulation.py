@@ -20,7 +20,7 @@ import numpy as np
 import taichi as ti
 
 from . import runtime
-from .contacts import Contacts
+from .contacts import REST_TOLERANCE, Contacts
 from .projection import DEFAULT_TOLERANCE, MAX_ITERATIONS, Projection
 from .grid import Grid, GridGeometry
 from . import observe
@@ -151,7 +151,7 @@ class Simulation:
         (of which against a supported sphere); energy_pair_restitution,
         energy_wall_restitution, energy_rest_rule (kinetic energy removed by each
         cause [J]; see :meth:`energy_budget`); virial (sum over pair collisions of
-        r_ij . dp_i at contact [J]: the collisional pressure over a time T in volume V
+        r_ij . dp_i at contact [J s]: the collisional pressure over a time T in volume V
         is virial / (3 V T)); plus time and dt."""
         out = dict(self._totals)
         out["time"] = self.time
@@ -244,11 +244,19 @@ class Simulation:
 
     def max_step(self) -> float:
         """Largest h such that no sphere moves more than step_fraction * r_min [s]:
-        v_max h + g h^2/2 <= D, i.e. h = 2 D / (v_max + sqrt(v_max^2 + 2 g D))."""
+        v_max h + g h^2/2 <= D, i.e. h = 2 D / (v_max + sqrt(v_max^2 + 2 g D)); with
+        resting contact (gravity and the rest rule) also g h <= REST_TOLERANCE x rest
+        speed / 2, so that the approach gravity adds in one step is below the rest
+        tolerance and resting piles converge in few sweeps."""
         dist = self.step_fraction * self._r_min
         vmax = math.sqrt(max(self._vmax2, 0.0))
         denom = vmax + math.sqrt(vmax * vmax + 2.0 * self._g * dist)
-        return math.inf if denom == 0.0 else 2.0 * dist / denom
+        h = math.inf if denom == 0.0 else 2.0 * dist / denom
+        if self.features.supports:
+            # resting contact: gravity may add at most half the rest tolerance to an
+            # approach per step (see contacts.REST_TOLERANCE)
+            h = min(h, 0.5 * REST_TOLERANCE * self.rest_speed / self._g)
+        return h
 
     def step(self, h: float) -> None:
         """One step of length h [s] (does not advance ``time``; use advance)."""

@@ -23,7 +23,7 @@ kinetic energy, counted in ``stats['wall_rests']``.
 
 import taichi as ti
 
-from .params import E_WALLS, MULTI, VMAX2, WALLS, WALL_RESTS, StepParams
+from .params import E_REST, E_WALLS, MULTI, VMAX2, WALLS, WALL_RESTS, StepParams
 from .state import Features, SphereState
 
 MAX_WALL_BOUNCES = 8
@@ -133,7 +133,7 @@ class Motion:
                         bounced = False
                         if s >= 0 and s <= 2 * h and bounce < MAX_WALL_BOUNCES:
                             wc = w - acc * s
-                            wn = -e_w * wc
+                            wn = self.rebound(i, -wc, e_w)
                             dn = wn * s + ti.cast(0.5, self.real) * acc * s * s
                             if side < 0:
                                 x[a] = lo_c + dn
@@ -143,8 +143,6 @@ class Motion:
                             moved += (wn - wc) * s
                             ti.atomic_add(self.params.count[WALLS], 1)
                             self.count_hit(i)
-                            if ti.static(not self.f.elastic_walls):
-                                ti.atomic_add(self.params.vals[E_WALLS], ti.cast(0.5, self.real) * self.state.mass_of(i) * (wc * wc - wn * wn))
                             bounced = True
                         if not bounced and bounce < MAX_WALL_BOUNCES:
                             # past the wall without a crossing on its current path: a
@@ -156,7 +154,7 @@ class Motion:
                                 # mirror into the box and reflect (energy exact for e=1)
                                 wn = w
                                 if w < 0:
-                                    wn = -e_w * w
+                                    wn = self.rebound(i, -w, e_w)
                                 if side < 0:
                                     x[a] = lo_c - d
                                 else:
@@ -165,8 +163,6 @@ class Motion:
                                 moved += -2 * d
                                 ti.atomic_add(self.params.count[WALLS], 1)
                                 self.count_hit(i)
-                                if ti.static(not self.f.elastic_walls):
-                                    ti.atomic_add(self.params.vals[E_WALLS], ti.cast(0.5, self.real) * self.state.mass_of(i) * (w * w - wn * wn))
                             else:
                                 # put it on the wall and pay the potential energy of the
                                 # lift -acc*d out of its normal kinetic energy, so energy
@@ -174,7 +170,7 @@ class Motion:
                                 w2 = ti.max(w * w - 2 * acc * d, 0)
                                 wn = ti.sqrt(w2)
                                 if w < 0:
-                                    wn *= e_w
+                                    wn = self.rebound(i, wn, e_w)
                                 if side < 0:
                                     x[a] = lo_c
                                 else:
@@ -199,6 +195,23 @@ class Motion:
                     self.state.support[i] = 1
         self.state.x[i] = x
         self.state.v[i] = v
+
+    @ti.func
+    def rebound(self, i, speed, e_w):
+        """Outward normal speed after sphere i hits a wall at normal speed ``speed`` >= 0
+        [m/s]: e_w x speed, or 0 below the rest speed (rest rule). Books the kinetic
+        energy removed (vals E_WALLS or E_REST)."""
+        out = e_w * speed
+        rested = False
+        if ti.static(self.f.rest_rule):
+            if speed < self.params.rest_speed[None]:
+                out = ti.cast(0, self.real)
+                rested = True
+                ti.atomic_add(self.params.vals[E_REST], ti.cast(0.5, self.real) * self.state.mass_of(i) * speed * speed)
+        if ti.static(not self.f.elastic_walls):
+            if not rested:
+                ti.atomic_add(self.params.vals[E_WALLS], ti.cast(0.5, self.real) * self.state.mass_of(i) * (speed * speed - out * out))
+        return out
 
     @ti.func
     def count_hit(self, i):
