@@ -12,7 +12,11 @@ __all__ = ["VideoWriter", "DiagnosticsWriter", "CSV_COLUMNS", "check_writable"]
 
 CSV_COLUMNS = ["frame", "time", "kinetic", "potential", "total", "px", "py", "pz",
                "steps", "pair_collisions", "wall_collisions", "wall_rests", "sweeps",
-               "max_overlap", "unresolved", "dt"]
+               "max_overlap", "unresolved", "dt", "sweep_limit_hits",
+               "multi_collision_spheres", "rest_collisions", "energy_pair_restitution",
+               "energy_wall_restitution", "energy_rest_rule", "projected_pairs"]
+#: CSV columns copied from Simulation.stats as they are
+_STATS_COLUMNS = CSV_COLUMNS[8:]
 
 
 def check_writable(path: str) -> None:
@@ -75,11 +79,8 @@ class DiagnosticsWriter:
         pe = observe.potential_energy(state, self.gravity)
         p = observe.momentum(state)
         row = dict(frame=frame, time=state.time, kinetic=ke, potential=pe, total=ke + pe,
-                   px=p[0], py=p[1], pz=p[2], steps=stats["steps"],
-                   pair_collisions=stats["pair_collisions"],
-                   wall_collisions=stats["wall_collisions"], wall_rests=stats["wall_rests"],
-                   sweeps=stats["sweeps"], max_overlap=stats["max_overlap"],
-                   unresolved=stats["unresolved"], dt=stats["dt"])
+                   px=p[0], py=p[1], pz=p[2])
+        row.update({c: stats[c] for c in _STATS_COLUMNS})
         self._csv.writerow([_fmt(row[c]) for c in CSV_COLUMNS])
         self._fh.flush()
         self.rows += 1

@@ -278,7 +278,7 @@ def simulation_with(scene, arch, precision, flip):
     features are not used by the scene (g = 0, equal radii, e = 1 are still its values),
     so results are the same; only the compiled code and the fields differ."""
     wanted = dataclasses.replace(Features.from_scene(scene), **flip)
-    with mock.patch.object(Features, "from_scene", classmethod(lambda cls, _scene: wanted)):
+    with mock.patch.object(Features, "from_scene", classmethod(lambda cls, _scene, *_a, **_k: wanted)):
         sim = ts.Simulation(scene, arch=arch, precision=precision)
     if sim.features != wanted:
         raise RuntimeError("Simulation no longer takes its Features from Features.from_scene:"
