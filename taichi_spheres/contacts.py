@@ -173,16 +173,31 @@ class Contacts:
     @ti.func
     def approaching(self, dd, du, uu):
         """d.u < 0 beyond round-off (relative to |d||u|)."""
-        out = du < -ti.cast(ti.static(self.approach_eps), self.real) * ti.sqrt(dd * uu)
-        if ti.static(self.f.rest_rule):
-            # resting contacts: an approach slower than REST_TOLERANCE x the rest
-            # speed is left alone (it closes the gap by less than that speed x h per
-            # step; gravity makes it faster by g h in the next step)
-            out = out and du * du > ti.static(REST_TOLERANCE ** 2) * self.params.rest_speed[None] ** 2 * dd
+        return du < -ti.cast(ti.static(self.approach_eps), self.real) * ti.sqrt(dd * uu)
+
+    @ti.func
+    def resting(self, i, j):
+        """The rest rule applies to pair (i, j): always when the scene set a rest speed
+        without gravity; with gravity (supports) only when one of the two spheres is
+        supported in this step (a contact of a pile, not of a gas in flight)."""
+        out = True
+        if ti.static(self.f.supports):
+            out = self.state.support[i] == 1 or self.state.support[j] == 1
         return out
 
     @ti.func
-    def contact_time(self, d, u, sigma):
+    def approaching_pair(self, i, j, dd, du, uu):
+        """approaching(), and for a resting contact (see resting()) faster than
+        REST_TOLERANCE x the rest speed: a slower one is left alone (it closes the gap by
+        less than that speed x h per step; gravity makes it faster by g h in the next)."""
+        out = self.approaching(dd, du, uu)
+        if ti.static(self.f.rest_rule):
+            if out and self.resting(i, j):
+                out = du * du > ti.static(REST_TOLERANCE ** 2) * self.params.rest_speed[None] ** 2 * dd
+        return out
+
+    @ti.func
+    def contact_time(self, i, j, d, u, sigma):
         """For an overlapping pair (|d| < sigma; d, u relative position and velocity at
         the end of the step): the time s since it came into contact if that contact is
         to be resolved now, else -1 [s]. |d - u s| = sigma is solved by the
@@ -200,7 +215,7 @@ class Contacts:
         if uu > 0:
             c = sigma * sigma - dd
             s = c / (ti.sqrt(du * du + uu * c) - du)
-            if self.approaching(dd, du, uu):
+            if self.approaching_pair(i, j, dd, du, uu):
                 out = ti.min(s, h)
             elif s <= h:
                 dc = d - u * s
@@ -241,7 +256,7 @@ class Contacts:
                 # dense clusters cannot collide without end within a step
                 rest = ti.max(self.state.hits[i], self.state.hits[j]) >= ti.static(COLLAPSE_HITS - 1)
             if ti.static(self.f.rest_rule):
-                rest = rest or -un < self.params.rest_speed[None]
+                rest = rest or (-un < self.params.rest_speed[None] and self.resting(i, j))
             wi = ti.cast(0.5, self.real)
             wj = ti.cast(0.5, self.real)
             meff = ti.cast(ti.static(0.5 * self.state.m0), self.real)
@@ -344,7 +359,7 @@ class Contacts:
         d, sigma = self.separation_from(xi, i, j)
         dd = d.norm_sqr()
         if dd < sigma * sigma:
-            s = self.contact_time(d, self.rel_velocity(i, j), sigma)
+            s = self.contact_time(i, j, d, self.rel_velocity(i, j), sigma)
             if ti.static(record):
                 if s >= 0:
                     slot = ti.atomic_add(self.debug_count[None], 1)
@@ -430,7 +445,7 @@ class Contacts:
         s = ti.cast(-1, self.real)
         d, sigma = self.separation(i, j)
         if d.norm_sqr() < sigma * sigma:
-            s = self.contact_time(d, self.rel_velocity(i, j), sigma)
+            s = self.contact_time(i, j, d, self.rel_velocity(i, j), sigma)
         return s
 
     @ti.func

@@ -9,8 +9,8 @@ import numpy as np
 import taichi as ti
 
 # indices into StepParams.count (i32, per step)
-REMAINING, PAIRS, WALLS, WALL_RESTS, MULTI, RESTED, SUPPORTED = range(7)
-N_COUNTS = 7
+REMAINING, PAIRS, WALLS, WALL_RESTS, MULTI, RESTED, SUPPORTED, FLOOR = range(8)
+N_COUNTS = 8
 # indices into StepParams.vals (real, per step)
 SEP_OVERLAP, OPEN_OVERLAP, VMAX2, MOVED, E_PAIRS, E_WALLS, E_REST, VIRIAL = range(8)
 N_VALS = 8
@@ -25,7 +25,7 @@ class StepParams:
     count: (N_COUNTS,) i32 — remaining approaching overlaps, pair and wall
         collisions, wall rest clamps, spheres with more than one collision, pair
         collisions made perfectly inelastic by the rest rule, of which against a
-        supported sphere, in the current step.
+        supported sphere, spheres supported by the floor, in the current step.
     vals: (N_VALS,) real — max relative overlap of separating pairs, of
         approaching pairs in the last detection, max |v|^2, max distance moved;
         kinetic energy removed by pair restitution, by wall restitution, by the

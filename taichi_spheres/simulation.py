@@ -24,7 +24,7 @@ from .contacts import REST_TOLERANCE, Contacts
 from .projection import DEFAULT_TOLERANCE, MAX_ITERATIONS, Projection
 from .grid import Grid, GridGeometry
 from . import observe
-from .params import (E_PAIRS, E_REST, E_WALLS, MOVED, MULTI, OPEN_OVERLAP, PAIRS, REMAINING,
+from .params import (E_PAIRS, E_REST, E_WALLS, FLOOR, MOVED, MULTI, OPEN_OVERLAP, PAIRS, REMAINING,
                      RESTED, SEP_OVERLAP, SUPPORTED, VIRIAL, VMAX2, WALL_RESTS, WALLS,
                      StepParams)
 from .scene import Scene
@@ -132,6 +132,7 @@ class Simulation:
         self.sim_seconds = 0.0   # wall-clock time spent in advance()
         self._motion.measure_vmax()
         self._vmax2 = float(self._params.vals[VMAX2])
+        self._resting = False     # a sphere was supported by the floor in the last step
 
     # ---- public API ----
     @property
@@ -201,7 +202,7 @@ class Simulation:
         """Everything needed to continue bit-for-bit: state, time, step bound, counters."""
         self._check()
         return dict(x=self._state.positions(), v=self._state.velocities(), time=self.time,
-                    vmax2=self._vmax2, totals=dict(self._totals), last_step=dict(self.last_step),
+                    vmax2=self._vmax2, resting=self._resting, totals=dict(self._totals), last_step=dict(self.last_step),
                     n=self.n, precision=self.precision, step_fraction=self.step_fraction,
                     max_sweeps=self.max_sweeps)
 
@@ -215,6 +216,7 @@ class Simulation:
                                  f"simulation's {mine!r}")
         self.set_state(ckpt["x"], ckpt["v"], ckpt["time"])
         self._vmax2 = float(ckpt["vmax2"])
+        self._resting = bool(ckpt.get("resting", False))
         self._totals.update(ckpt["totals"])
         self.last_step = dict(ckpt["last_step"])
 
@@ -245,14 +247,14 @@ class Simulation:
     def max_step(self) -> float:
         """Largest h such that no sphere moves more than step_fraction * r_min [s]:
         v_max h + g h^2/2 <= D, i.e. h = 2 D / (v_max + sqrt(v_max^2 + 2 g D)); with
-        resting contact (gravity and the rest rule) also g h <= REST_TOLERANCE x rest
-        speed / 2, so that the approach gravity adds in one step is below the rest
+        resting contact (gravity and the rest rule, and a sphere supported by the floor
+        in the last step) also g h <= REST_TOLERANCE x rest speed / 2, so that the approach gravity adds in one step is below the rest
         tolerance and resting piles converge in few sweeps."""
         dist = self.step_fraction * self._r_min
         vmax = math.sqrt(max(self._vmax2, 0.0))
         denom = vmax + math.sqrt(vmax * vmax + 2.0 * self._g * dist)
         h = math.inf if denom == 0.0 else 2.0 * dist / denom
-        if self.features.supports:
+        if self.features.supports and self._resting:
             # resting contact: gravity may add at most half the rest tolerance to an
             # approach per step (see contacts.REST_TOLERANCE)
             h = min(h, 0.5 * REST_TOLERANCE * self.rest_speed / self._g)
@@ -305,6 +307,7 @@ class Simulation:
             overlap = self._project()
         t["max_overlap"] = max(t["max_overlap"], overlap)
         self._vmax2 = float(v[VMAX2])
+        self._resting = bool(counts[FLOOR] > 0)
         self.last_step = dict(h=h, unresolved=remaining, max_overlap=overlap, sweeps=sweeps,
                               pair_collisions=int(counts[PAIRS]),
                               wall_collisions=int(counts[WALLS]),

@@ -23,7 +23,7 @@ kinetic energy, counted in ``stats['wall_rests']``.
 
 import taichi as ti
 
-from .params import E_REST, E_WALLS, MULTI, VMAX2, WALLS, WALL_RESTS, StepParams
+from .params import E_REST, E_WALLS, FLOOR, MULTI, VMAX2, WALLS, WALL_RESTS, StepParams
 from .state import Features, SphereState
 
 MAX_WALL_BOUNCES = 8
@@ -192,6 +192,8 @@ class Motion:
             self.state.moved[i] += moved
             if ti.static(self.f.supports):
                 if on_floor and v.dot(self.params.up[None]) <= self.params.rest_speed[None]:
+                    if self.state.support[i] == 0:
+                        ti.atomic_add(self.params.count[FLOOR], 1)
                     self.state.support[i] = 1
         self.state.x[i] = x
         self.state.v[i] = v

@@ -81,7 +81,8 @@ def run(scene, t_end, samples=12):
                 ke_peak=max(kinetic), e0=b["initial"], e_max=max(total), e_end=b["current"],
                 budget=b, pair=pair, floor=floor, steps=s["steps"],
                 sweeps=s["sweeps"] / max(s["steps"], 1), limit=s["sweep_limit_hits"],
-                projected=s["projected_steps"], rest_speed=sim.rest_speed)
+                projected=s["projected_steps"], rest_speed=sim.rest_speed,
+                mgr=float(scene.mass.sum() * np.linalg.norm(scene.gravity) * scene.radius.max()))
 
 
 def markdown(rows, command, total):
@@ -89,12 +90,13 @@ def markdown(rows, command, total):
            f"Generated {datetime.date.today().isoformat()} on {cpu_name()} (CPU backend, f64) "
            f"by `{command}` in {total:.0f} s. Rules: README \"Resting contact and inelastic "
            f"collapse\".\n",
-           "| case | N | t (s) | KE end / KE peak | max(E) − E0 (J) | E0 − E end (J) | "
+           "| case | N | t (s) | KE end / KE peak | KE end / (M g r) | max(E) − E0 (J) | E0 − E end (J) | "
            "max overlap / σ | floor / r | steps | sweeps/step | limit hits | projected steps "
            "| wall s |",
-           "|:--|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|"]
+           "|:--|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|"]
     for r in rows:
         out.append(f"| {r['name']} | {r['n']} | {r['t']:g} | {r['ke_end'] / r['ke_peak']:.1e} | "
+                   f"{r['ke_end'] / r['mgr']:.1e} | "
                    f"{r['e_max'] - r['e0']:.2e} | {r['e0'] - r['e_end']:.4g} | {r['pair']:.1e} | "
                    f"{r['floor']:.1e} | {r['steps']} | {r['sweeps']:.1f} | {r['limit']} | "
                    f"{r['projected']} | {r['wall']:.0f} |")
@@ -106,7 +108,9 @@ def markdown(rows, command, total):
         b = r["budget"]
         out.append(f"| {r['name']} | {r['rest_speed']:.3g} | {b['pair_restitution']:.4g} | "
                    f"{b['wall_restitution']:.4g} | {b['rest_rule']:.4g} | {b['unaccounted']:.3g} |")
-    out.append("\nKE peak is the largest of the sampled kinetic energies (12 samples). A "
+    out.append("\nKE peak is the largest of the sampled kinetic energies (12 samples; the "
+               "column starts at rest, so its ratio says nothing: see KE end / (M g r), the "
+               "kinetic energy left against that of the whole mass falling one radius). A "
                "negative `unaccounted` is potential energy given back by projection to "
                "spheres that had crept into each other (their sinking was booked to the rest "
                "rule); `max(E) − E0` ≤ 0 means the total energy never rose above its start "
