@@ -8,7 +8,7 @@ overlap between any two spheres (brute force, relative to the contact distance) 
 below the floor (relative to the radius), steps, sweeps per step, sweep-limit hits,
 projected steps, and the wall time.
 
-    python tools/resting.py            # column + the 2000-sphere scenes/pour.toml, ~5-10 min
+    python tools/resting.py            # column + the 2000-sphere scenes/pour.toml to 2 s, ~10 min
     python tools/resting.py --quick    # column + a 300-sphere pour
 """
 from __future__ import annotations
@@ -130,7 +130,7 @@ def main(argv=None):
     if args.quick:
         rows.append(run(small_pour(), 1.5))
     else:
-        rows.append(run(ts.load_scene(os.path.join(ROOT, "scenes", "pour.toml")), 3.0))
+        rows.append(run(ts.load_scene(os.path.join(ROOT, "scenes", "pour.toml")), 2.0))
     text = markdown(rows, command, time.perf_counter() - t0)
     print(text)
     if not args.no_write:
