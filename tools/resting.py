@@ -95,7 +95,7 @@ def markdown(rows, command, total):
            "| wall s |",
            "|:--|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|"]
     for r in rows:
-        out.append(f"| {r['name']} | {r['n']} | {r['t']:g} | {r['ke_end'] / r['ke_peak']:.1e} | "
+        out.append(f"| {r['name']} | {r['n']} | {r['t']:g} | {(r['ke_end'] / r['ke_peak'] if r['ke_peak'] > 0 else 0.0):.1e} | "
                    f"{r['ke_end'] / r['mgr']:.1e} | "
                    f"{r['e_max'] - r['e0']:.2e} | {r['e0'] - r['e_end']:.4g} | {r['pair']:.1e} | "
                    f"{r['floor']:.1e} | {r['steps']} | {r['sweeps']:.1f} | {r['limit']} | "
