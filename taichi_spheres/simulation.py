@@ -303,7 +303,10 @@ class Simulation:
             t["unresolved"] += remaining
             t["sweep_limit_hits"] += 1
             overlap = max(overlap, float(v[OPEN_OVERLAP]))
-        if overlap > self.overlap_tolerance:
+        # projection only where overlaps can build up step after step: contacts left
+        # at the sweep limit, or spheres resting under gravity (a gas's leftover
+        # overlaps separate by themselves)
+        if overlap > self.overlap_tolerance and (remaining > 0 or self.features.supports):
             overlap = self._project()
         t["max_overlap"] = max(t["max_overlap"], overlap)
         self._vmax2 = float(v[VMAX2])
