@@ -17,8 +17,8 @@ past a wall is then put back by the walls' energy-safe placement
 
 import taichi as ti
 
+from .contacts import Contacts
 from .grid import ALL_ROWS, Grid
-from .params import StepParams
 from .state import Features, SphereState
 from .walls import Motion
 
@@ -36,24 +36,20 @@ class Projection:
     worst (0-d) real — largest relative overlap seen by the last iteration (before its
     push); pushed (0-d) i32 — pairs pushed by the last iteration."""
 
-    def __init__(self, state: SphereState, grid: Grid, params: StepParams, motion: Motion,
-                 features: Features, separation, serial: bool, tolerance: float):
+    def __init__(self, state: SphereState, grid: Grid, contacts: Contacts, motion: Motion,
+                 features: Features, serial: bool, tolerance: float):
         self.state = state
         self.grid = grid
-        self.params = params
+        self.contacts = contacts    # its minimum-image separation and stencil table
         self.motion = motion
         self.f = features
         self.real = state.real
         self.n = state.n
         self.serial = serial
         self.tolerance = tolerance
-        self.separation_from = separation   # Contacts.separation_from (minimum image)
         self.push = ti.Vector.field(3, self.real, shape=self.n)
         self.worst = ti.field(self.real, shape=())
         self.pushed = ti.field(ti.i32, shape=())
-        self.all_rows = ti.Vector.field(4, ti.i32, shape=len(ALL_ROWS))
-        import numpy as np
-        self.all_rows.from_numpy(np.array(ALL_ROWS, dtype=np.int32))
 
         @ti.kernel
         def project_once():
@@ -78,7 +74,7 @@ class Projection:
             if ti.static(not self.f.equal_masses):
                 wi_num = self.state.inv_mass_of(i)
             for k in range(ti.static(len(ALL_ROWS))):
-                a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
+                a0, b0, a1, b1 = self.grid.row_ranges(ci, self.contacts.all_rows[k])
                 for q in range(a0, b0):
                     acc += self.pair_push(xi, i, self.grid.order[q], wi_num, tol)
                 for q in range(a1, b1):
@@ -97,7 +93,7 @@ class Projection:
         RELAXATION x overlap along the line of centres, times i's inverse-mass weight."""
         out = ti.Vector.zero(self.real, 3)
         if j != i:
-            d, sigma = self.separation_from(xi, i, j)
+            d, sigma = self.contacts.separation_from(xi, i, j)
             dd = d.norm_sqr()
             if dd < sigma * sigma:
                 dist = ti.sqrt(dd)

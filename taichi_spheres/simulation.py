@@ -115,9 +115,8 @@ class Simulation:
         self._contacts = Contacts(self._state, self._grid, self._params, self._motion,
                                   self.features, serial_light, serial_heavy, serial_few=cpu)
         self.overlap_tolerance = DEFAULT_TOLERANCE
-        self._projection = Projection(self._state, self._grid, self._params, self._motion,
-                                      self.features, self._contacts.separation_from,
-                                      serial_light, self.overlap_tolerance)
+        self._projection = Projection(self._state, self._grid, self._contacts, self._motion,
+                                      self.features, serial_light, self.overlap_tolerance)
         self._r_min = float(scene.radius.min())
         self._g = float(np.linalg.norm(scene.gravity))
         self.time = 0.0
