@@ -4,6 +4,9 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 ARCH ?= cpu
+# pytest-xdist workers: most of a cold test run is Taichi compiling each test's kernels,
+# one kernel at a time, so two processes halve it on 2 cores (WORKERS=0: one process)
+WORKERS ?= auto
 
 .PHONY: demo test test-slow bench venv clean
 
@@ -21,10 +24,10 @@ demo: $(STAMP)
 	$(BIN)/taichi-spheres run scenes/seed_five.toml -o out/seed_five.mp4 --arch $(ARCH)
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q --arch $(ARCH)
+	$(BIN)/python -m pytest -q -n $(WORKERS) --arch $(ARCH)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -q --arch $(ARCH) --slow
+	$(BIN)/python -m pytest -q -n $(WORKERS) --arch $(ARCH) --slow
 
 bench: $(STAMP)
 	$(BIN)/python tools/bench.py --arch $(ARCH)

@@ -59,6 +59,12 @@ COLLAPSE_HITS = 4
 MAX_BLOCK_COLLISIONS = 64
 
 
+def decode_status(status: int):
+    """(remaining approaching overlaps, grid must be rebuilt) from a detection status
+    (:meth:`Contacts.status`, returned by ``detect_all`` and ``sweep``)."""
+    return status >> 1, bool(status & 1)
+
+
 @ti.data_oriented
 class Contacts:
     """Detection and colour-by-colour resolution of overlapping approaching pairs.
@@ -105,6 +111,10 @@ class Contacts:
         # but every use is order-independent: disjoint blocks, per-sphere updates)
         self.active_list = ti.field(ti.i32, shape=grid.m)
         self.n_active = ti.field(ti.i32, shape=())
+        # the listed cells sorted by colour (bucket_by_colour), and where each starts
+        self.by_colour = ti.field(ti.i32, shape=grid.m)
+        self.colour_start = ti.field(ti.i32, shape=len(self.colours) + 1)
+        self.colour_fill = ti.field(ti.i32, shape=len(self.colours))
         self.touched = ti.field(ti.i32, shape=self.n)
         # per sphere, the earliest contact (largest time since contact) among its pairs
         # found by the last detection: a pair is collided only when it is the earliest
@@ -115,29 +125,40 @@ class Contacts:
 
         # hot kernels as plain closures: a data_oriented method kernel pays ~40 us of
         # Python dispatch per launch for its `self` template argument
+        # kernels that end a detection return its status (see status()): one launch
+        # instead of a launch plus two scalar reads per sweep
+
         @ti.kernel
-        def detect_all():
+        def detect_all() -> ti.i32:
             self._detect_all_body()
+            return self.status()
+
+        @ti.kernel
+        def bucket_parallel():
+            self.bucket_by_colour(False)
 
         @ti.kernel
         def resolve_colour_parallel(colour: ti.i32):
             self.resolve_colour(colour, False)
 
         @ti.kernel
-        def sweep_serial():
+        def sweep_serial() -> ti.i32:
             self.resolve_colours_serially()
             self.after_sweep(True)
+            return self.status()
 
         @ti.kernel
         def resolve_colours_serial():
             self.resolve_colours_serially()
 
         @ti.kernel
-        def after_sweep_parallel():
+        def after_sweep_parallel() -> ti.i32:
             self.after_sweep(False)
+            return self.status()
 
 
         self.detect_all = detect_all
+        self.bucket_parallel = bucket_parallel
         self.resolve_colour_parallel = resolve_colour_parallel
         self.sweep_serial = sweep_serial
         self.resolve_colours_serial = resolve_colours_serial
@@ -352,6 +373,16 @@ class Contacts:
 
     # ---- detection ----
     @ti.func
+    def status(self):
+        """2 x count[REMAINING] (approaching overlaps found by the last detection) + 1
+        if a sphere moved farther than the grid's slack since the grid was built (the
+        grid must be rebuilt before the next sweep). Decode with :func:`decode_status`."""
+        far = 0
+        if self.params.vals[MOVED] > ti.cast(ti.static(self.grid.geom.slack), self.real):
+            far = 1
+        return 2 * self.params.count[REMAINING] + far
+
+    @ti.func
     def examine(self, xi, i, j, ci, record: ti.template()):
         """Classify pair (i, j), i at xi in cell ci (vec3): an overlap to resolve (see
         contact_time) is counted for its owner cell; any other overlap only updates the
@@ -382,8 +413,11 @@ class Contacts:
 
     @ti.func
     def _detect_all_body(self):
-        """Half-stencil scan of every sphere: fills ``active`` and count[REMAINING]."""
+        """Half-stencil scan of every sphere: fills ``active`` and count[REMAINING].
+        Always runs on a freshly built grid, so the distance moved since the build
+        (vals[MOVED]) starts again from 0."""
         self.params.reset_detection()
+        self.params.vals[MOVED] = 0
         self.clear_active(ti.static(self.serial_light))
         ti.loop_config(serialize=ti.static(self.serial_light))
         for i in range(self.n):
@@ -423,15 +457,19 @@ class Contacts:
         pair of two touched spheres is examined once, from the lower id."""
         ti.loop_config(serialize=ti.static(self.serial_heavy or serial))
         for t in range(self.n_touched[None]):
-            i = self.touched[t]
-            ci = self.grid.coords(self.grid.cell_of[i])
-            xi = self.state.x[i]
-            for k in range(ti.static(len(ALL_ROWS))):
-                a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
-                for q in range(a0, b0):
-                    self.examine_if_new(xi, i, self.grid.order[q], ci)
-                for q in range(a1, b1):
-                    self.examine_if_new(xi, i, self.grid.order[q], ci)
+            self.examine_around(self.touched[t])
+
+    @ti.func
+    def examine_around(self, i):
+        """examine_if_new for sphere i against every sphere of its 27 cells."""
+        ci = self.grid.coords(self.grid.cell_of[i])
+        xi = self.state.x[i]
+        for k in range(ti.static(len(ALL_ROWS))):
+            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
+            for q in range(a0, b0):
+                self.examine_if_new(xi, i, self.grid.order[q], ci)
+            for q in range(a1, b1):
+                self.examine_if_new(xi, i, self.grid.order[q], ci)
 
     @ti.func
     def examine_if_new(self, xi, i, j, ci):
@@ -524,28 +562,50 @@ class Contacts:
         return idx
 
     @ti.func
-    def resolve_listed(self, t, colour):
-        k = self.active_list[t]
-        c = self.grid.coords(k)
-        if self.colour_index(c) == colour and self.active[k] > 0:
-            self.resolve_cell(c, k)
+    def bucket_by_colour(self, serial: ti.template()):
+        """Counting sort of the listed cells (active_list[0:n_active]) by colour into
+        ``by_colour``: colour c's cells are by_colour[colour_start[c]:colour_start[c+1]]
+        (order inside a colour is thread-dependent and irrelevant: its blocks are
+        disjoint). Call at kernel top level."""
+        for c in ti.static(range(len(self.colours) + 1)):
+            self.colour_start[c] = 0
+        ti.loop_config(serialize=ti.static(self.serial_light or serial))
+        for t in range(self.n_active[None]):
+            col = self.colour_index(self.grid.coords(self.active_list[t]))
+            ti.atomic_add(self.colour_start[col + 1], 1)
+        for c in ti.static(range(len(self.colours))):
+            self.colour_start[c + 1] += self.colour_start[c]
+            self.colour_fill[c] = self.colour_start[c]
+        ti.loop_config(serialize=ti.static(self.serial_light or serial))
+        for t in range(self.n_active[None]):
+            k = self.active_list[t]
+            slot = ti.atomic_add(self.colour_fill[self.colour_index(self.grid.coords(k))], 1)
+            self.by_colour[slot] = k
+
+    @ti.func
+    def resolve_bucketed(self, t):
+        """Resolve the cell at by_colour[t] if it still has pairs."""
+        k = self.by_colour[t]
+        if self.active[k] > 0:
+            self.resolve_cell(self.grid.coords(k), k)
 
     @ti.func
     def resolve_colour(self, colour, serial: ti.template()):
-        """One parallel pass over the listed cells of one colour; their blocks are
-        disjoint, so no two threads touch one sphere."""
+        """One parallel pass over the cells of one colour (after bucket_by_colour);
+        their blocks are disjoint, so no two threads touch one sphere."""
         ti.loop_config(serialize=ti.static(self.serial_heavy or serial))
-        for t in range(self.n_active[None]):
-            self.resolve_listed(t, colour)
+        for t in range(self.colour_start[colour], self.colour_start[colour + 1]):
+            self.resolve_bucketed(t)
 
     @ti.func
     def resolve_colours_serially(self):
         """The colours one after another in one serial loop (one launch): for small
-        systems on the CPU, where a launch per colour costs more than the work."""
+        systems on the CPU, where a launch per colour costs more than the work. The
+        bucketed list is in colour order, so one pass over it is every colour in turn."""
+        self.bucket_by_colour(True)
         ti.loop_config(serialize=True)
-        for colour in range(ti.static(len(self.colours))):
-            for t in range(self.n_active[None]):
-                self.resolve_listed(t, colour)
+        for t in range(self.n_active[None]):
+            self.resolve_bucketed(t)
 
     @ti.func
     def after_sweep(self, serial: ti.template()):
@@ -563,19 +623,20 @@ class Contacts:
             self.state.modified[self.touched[t]] = 0
         self.n_touched[None] = 0
 
-    def sweep(self, pending):
-        """Resolve every colour in turn, then :meth:`after_sweep`. With few pending
-        pairs on the CPU the loops run serially: a parallel launch there costs more
-        than the work (a second compiled variant, built on first use)."""
+    def sweep(self, pending) -> int:
+        """Resolve every colour in turn, then :meth:`after_sweep`; returns the status of
+        the new detection (:func:`decode_status`). With few pending pairs on the CPU
+        the loops run serially: a parallel launch there costs more than the work (a
+        second compiled variant, built on first use)."""
         if self.serial_heavy or (self.serial_few and pending <= FEW_PAIRS):
-            self.sweep_serial()
-        elif self.serial_few and pending <= SERIAL_RESOLVE_PAIRS:
+            return self.sweep_serial()
+        if self.serial_few and pending <= SERIAL_RESOLVE_PAIRS:
             self.resolve_colours_serial()
-            self.after_sweep_parallel()
-        else:
-            for k in range(len(self.colours)):
-                self.resolve_colour_parallel(k)
-            self.after_sweep_parallel()
+            return self.after_sweep_parallel()
+        self.bucket_parallel()
+        for k in range(len(self.colours)):
+            self.resolve_colour_parallel(k)
+        return self.after_sweep_parallel()
 
     # ---- debugging / tests ----
     def list_overlaps(self):

@@ -20,11 +20,13 @@ import numpy as np
 import taichi as ti
 
 from . import runtime
-from .contacts import REST_TOLERANCE, Contacts
+from .contacts import REST_TOLERANCE, Contacts, decode_status
+from .fused import FusedStep
 from .projection import DEFAULT_TOLERANCE, MAX_ITERATIONS, Projection
 from .grid import Grid, GridGeometry
 from . import observe
-from .params import (E_PAIRS, E_REST, E_WALLS, FLOOR, MOVED, MULTI, OPEN_OVERLAP, PAIRS, REMAINING,
+from .params import (E_PAIRS, E_REST, E_WALLS, FLOOR, MULTI, OPEN_OVERLAP, PAIRS, PROJ_WORST,
+                     PROJECTED, PROJECTED_PAIRS, REMAINING,
                      RESTED, SEP_OVERLAP, SUPPORTED, VIRIAL, VMAX2, WALL_RESTS, WALLS,
                      StepParams)
 from .scene import Scene
@@ -74,13 +76,18 @@ class Simulation:
     step / smallest radius, in (0, 1]. max_sweeps: detect/resolve sweeps per step.
     threads: CPU threads (None: Taichi's default). compile_all: compile every
     optional feature in even when the scene does not need it (same results; for
-    measuring what compiling them out saves).
+    measuring what compiling them out saves). fused: for systems small enough that
+    the CPU runs every loop serially (below 3,000 spheres), run each step as one or
+    two kernel launches (fused.py; same bits, several times faster where steps have
+    many sweeps, as in piles), at the price of compiling its kernels once per scene
+    (~10-60 s on 2 cores; Taichi's offline cache keeps them for later runs); ignored
+    elsewhere. Off by default: worth it for long or repeated runs.
     """
 
     def __init__(self, scene: Scene, arch: str = "cpu", precision: str | None = None,
                  step_fraction: float = DEFAULT_STEP_FRACTION,
                  max_sweeps: int = DEFAULT_MAX_SWEEPS, threads: int | None = None,
-                 compile_all: bool = False):
+                 compile_all: bool = False, fused: bool = False):
         if not isinstance(scene, Scene):
             raise ValueError(f"scene must be a taichi_spheres.Scene, got {type(scene).__name__}")
         step_fraction = float(step_fraction)
@@ -88,6 +95,8 @@ class Simulation:
             raise ValueError(f"step_fraction must be in (0, 1], got {step_fraction}")
         if not isinstance(max_sweeps, int) or max_sweeps < 1:
             raise ValueError(f"max_sweeps must be a positive int, got {max_sweeps!r}")
+        if not isinstance(fused, bool):
+            raise ValueError(f"fused must be True or False, got {fused!r}")
         self.scene = scene
         self.step_fraction = step_fraction
         self.max_sweeps = max_sweeps
@@ -117,6 +126,12 @@ class Simulation:
         self.overlap_tolerance = DEFAULT_TOLERANCE
         self._projection = Projection(self._state, self._grid, self._contacts, self._motion,
                                       self.features, serial_light, self.overlap_tolerance)
+        # small CPU systems can run each step in one or two serial kernels (fused.py)
+        self._fused = None
+        if fused and self._contacts.serial_heavy:
+            self._fused = FusedStep(self._motion, self._grid, self._contacts,
+                                    self._projection, real, self.features.supports,
+                                    self.overlap_tolerance)
         self._r_min = float(scene.radius.min())
         self._g = float(np.linalg.norm(scene.gravity))
         self.time = 0.0
@@ -262,28 +277,45 @@ class Simulation:
     def step(self, h: float) -> None:
         """One step of length h [s] (does not advance ``time``; use advance)."""
         self._check()
-        self._params.h[None] = h
-        self._motion.drift()
-        self._grid.build()
-        self._contacts.detect_all()
-        count = self._params.count
-        vals = self._params.vals
-        remaining = count[REMAINING]
         sweeps = 0
-        while remaining > 0 and sweeps < self.max_sweeps:
-            self._contacts.sweep(remaining)
-            sweeps += 1
-            remaining = count[REMAINING]
-            if remaining > 0 and vals[MOVED] > self.geometry.slack:
-                # spheres moved too far from their cells for the margin: re-bin
-                self._grid.build()
-                self._contacts.detect_all()
-                vals[MOVED] = 0
-                remaining = count[REMAINING]
-                self._totals["grid_rebuilds"] += 1
-        counts = count.to_numpy()
-        v = vals.to_numpy().astype(np.float64)
+        remaining = None
+        if self._fused is not None:
+            status = self._fused.step(h, self.max_sweeps)
+            sweeps = status >> 2
+            if status & 2:
+                # a sphere moved farther than the grid's margin: go on kernel by kernel
+                remaining = self._rebuild()
+            elif status & 1:
+                self._fused.project()
+        else:
+            self._params.h[None] = h
+            self._motion.drift()
+            self._grid.build()
+            remaining, _ = decode_status(self._contacts.detect_all())
+        if remaining is not None:
+            while remaining > 0 and sweeps < self.max_sweeps:
+                remaining, far = decode_status(self._contacts.sweep(remaining))
+                sweeps += 1
+                if far:
+                    remaining = self._rebuild()
+        counts, v = self._params.read_back()
         t = self._totals
+        remaining = int(counts[REMAINING])
+        overlap = float(v[SEP_OVERLAP])
+        if remaining > 0:
+            overlap = max(overlap, float(v[OPEN_OVERLAP]))
+        # projection only where overlaps can build up step after step: contacts left
+        # at the sweep limit, or spheres resting under gravity (a gas's leftover
+        # overlaps separate by themselves); a fused step has already done it
+        if counts[PROJECTED]:
+            overlap = float(v[PROJ_WORST])
+            t["projected_steps"] += 1
+            t["projected_pairs"] += int(counts[PROJECTED_PAIRS])
+        elif overlap > self.overlap_tolerance and (remaining > 0 or self.features.supports):
+            overlap = self._project()
+            # the counters again: spheres the projection put back inside the box
+            # count as wall events (and their energy), as in a fused step
+            counts, v = self._params.read_back()
         t["steps"] += 1
         t["sweeps"] += sweeps
         t["pair_collisions"] += int(counts[PAIRS])
@@ -296,17 +328,9 @@ class Simulation:
         t["energy_wall_restitution"] += float(v[E_WALLS])
         t["energy_rest_rule"] += float(v[E_REST])
         t["virial"] += float(v[VIRIAL])
-        remaining = int(counts[REMAINING])
-        overlap = float(v[SEP_OVERLAP])
         if remaining > 0:
             t["unresolved"] += remaining
             t["sweep_limit_hits"] += 1
-            overlap = max(overlap, float(v[OPEN_OVERLAP]))
-        # projection only where overlaps can build up step after step: contacts left
-        # at the sweep limit, or spheres resting under gravity (a gas's leftover
-        # overlaps separate by themselves)
-        if overlap > self.overlap_tolerance and (remaining > 0 or self.features.supports):
-            overlap = self._project()
         t["max_overlap"] = max(t["max_overlap"], overlap)
         self._vmax2 = float(v[VMAX2])
         self._resting = bool(counts[FLOOR] > 0)
@@ -314,6 +338,14 @@ class Simulation:
                               pair_collisions=int(counts[PAIRS]),
                               wall_collisions=int(counts[WALLS]),
                               multi_collision_spheres=int(counts[MULTI]))
+
+    def _rebuild(self) -> int:
+        """A sphere moved farther than the grid's margin since the grid was built, so the
+        last re-detection may have missed a pair: re-bin and detect again; returns the
+        approaching overlaps found."""
+        self._grid.build()
+        self._totals["grid_rebuilds"] += 1
+        return decode_status(self._contacts.detect_all())[0]
 
     def _project(self) -> float:
         """Push apart pairs overlapping beyond the tolerance (projection.py); returns

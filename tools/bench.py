@@ -34,8 +34,7 @@ from taichi.lang.util import to_numpy_type  # noqa: E402
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres import runtime as ts_runtime  # noqa: E402
 from taichi_spheres.builders import gas  # noqa: E402
-from taichi_spheres.params import (MOVED, N_COUNTS, OPEN_OVERLAP, REMAINING,  # noqa: E402
-                                   SEP_OVERLAP, VMAX2)
+from taichi_spheres.contacts import decode_status  # noqa: E402
 from taichi_spheres.state import Features  # noqa: E402
 import bench_report  # noqa: E402  (tools/bench_report.py)
 
@@ -121,39 +120,23 @@ def staged_step(sim, h, times) -> int:
     ``times`` (keys STAGES) and returns the sweeps run. sim.stats is left alone; a
     re-binning inside the sweep loop counts as grid build and detection."""
     motion, grid, contacts, params = sim._motion, sim._grid, sim._contacts, sim._params
-    count, vals = params.count, params.vals
 
     def drift():
         params.h[None] = h
         motion.drift()
 
-    def detect():
-        contacts.detect_all()
-        return count[REMAINING]
-
-    def sweep(pending):
-        contacts.sweep(pending)
-        return count[REMAINING], vals[MOVED] > sim.geometry.slack
-
-    def counters():
-        counts = [count[k] for k in range(N_COUNTS)]
-        return counts, float(vals[SEP_OVERLAP]), float(vals[VMAX2])
-
     ti.sync()
     _timed(times, "drift", drift)
     _timed(times, "grid", grid.build)
-    remaining = _timed(times, "detect", detect)
+    remaining, _ = decode_status(_timed(times, "detect", contacts.detect_all))
     sweeps = 0
     while remaining > 0 and sweeps < sim.max_sweeps:
-        remaining, moved_far = _timed(times, "sweeps", sweep, remaining)
+        remaining, far = decode_status(_timed(times, "sweeps", contacts.sweep, remaining))
         sweeps += 1
-        if remaining > 0 and moved_far:
+        if far:
             _timed(times, "grid", grid.build)
-            vals[MOVED] = 0
-            remaining = _timed(times, "detect", detect)
-    _timed(times, "counters", counters)
-    if remaining > 0:
-        _timed(times, "counters", lambda: float(vals[OPEN_OVERLAP]))
+            remaining, _ = decode_status(_timed(times, "detect", contacts.detect_all))
+    _timed(times, "counters", params.read_back)
     return sweeps
 
 
@@ -230,7 +213,7 @@ def measure(scene, arch, precision, min_seconds, blocks=3, render=False) -> dict
     disturbed by other load on a shared machine). Rates are per wall second, step and
     stage times in ms per step, memory in bytes."""
     ts_runtime.ensure(arch, precision)      # a re-initialisation frees memory: not here
-    sim, info = build(lambda: ts.Simulation(scene, arch=arch, precision=precision))
+    sim, info = build(lambda: ts.Simulation(scene, arch=arch, precision=precision, fused=True))
     plain, staged = [], []
     for _ in range(blocks):
         plain.append(plain_block(sim, min_seconds / blocks, 10))
@@ -244,7 +227,8 @@ def measure(scene, arch, precision, min_seconds, blocks=3, render=False) -> dict
                collisions=best["collisions"] / secs, sim_per_wall=best["sim_time"] / secs,
                step_ms=secs / steps * 1e3, stages_ms=stages_ms, same_ms=same_ms,
                stage_sum_ms=sum(stages_ms.values()), bare_ms=bare_ms,
-               ratio=same_ms / bare_ms, sweeps=best["sweeps"] / steps, **info)
+               ratio=same_ms / bare_ms, sweeps=best["sweeps"] / steps,
+               fused=sim._fused is not None, **info)
     if render:
         row["render_ms"], row["render_error"] = render_ms(sim, scene)
     return row
