@@ -274,8 +274,10 @@ class Contacts:
             if ti.static(not self.f.elastic):
                 # collapse rule: from a sphere's COLLAPSE_HITS-th collision in one
                 # step on, its collisions are perfectly inelastic (normal), so that
-                # dense clusters cannot collide without end within a step
-                rest = ti.max(self.state.hits[i], self.state.hits[j]) >= ti.static(COLLAPSE_HITS - 1)
+                # dense clusters cannot collide without end within a step; inelastic
+                # pairs only (e < 1 checked here too: compiled in with e = 1 it must
+                # not change the physics)
+                rest = e < 1 and ti.max(self.state.hits[i], self.state.hits[j]) >= ti.static(COLLAPSE_HITS - 1)
             if ti.static(self.f.rest_rule):
                 rest = rest or (-un < self.params.rest_speed[None] and self.resting(i, j))
             wi = ti.cast(0.5, self.real)

@@ -127,6 +127,19 @@ def test_features_compiled_in_only_when_needed(arch):
     assert ts.Simulation(gas(100), arch=arch)._state.radius is None
 
 
+def test_compiled_in_restitution_with_e_1_stays_elastic(arch):
+    """Every feature compiled in (compile_all) on a dense elastic gas where spheres collide
+    several times per step: e = 1 read at run time must keep the collisions elastic (the
+    collapse rule for inelastic clusters must not apply), energy to round-off."""
+    scene = gas(500, packing=0.45, periodic=True, seed=4, speed=3.0)
+    sim = ts.Simulation(scene, arch=arch, compile_all=True, step_fraction=0.3)
+    e0 = ts.observe.kinetic_energy(sim.state())
+    sim.advance(0.5)
+    assert sim.stats["multi_collision_spheres"] > 1000
+    precision = sim.precision
+    assert abs(ts.observe.kinetic_energy(sim.state()) / e0 - 1) < tol(precision, 1e4)
+
+
 def test_stale_simulation_refuses_to_run(arch):
     sim = ts.Simulation(gas(50, periodic=True), arch=arch, precision="f64")
     ts.Simulation(gas(50, periodic=True), arch=arch, precision="f32")   # re-initialises

