@@ -18,7 +18,8 @@ class FusedStep:
     """A whole step of a small system on the CPU, where every loop runs serially
     anyway, in one or two kernel launches instead of ~5 + 2 per sweep + 3 per
     projection iteration (each ~30-50 us with its read-back, which dominate a step of a
-    few thousand spheres: a forming pile of 100 spheres steps ~15x faster).
+    few thousand spheres: in ``tools/peer_lammps.py``, 1,000 spheres piling on the floor
+    ran 1.19 instead of 1.72 wall s per simulated s).
 
     ``step(h, max_sweeps)``: drift and walls, grid build, detection, detect/resolve
     sweeps until no approaching overlap is left or ``max_sweeps``, or until a sphere
