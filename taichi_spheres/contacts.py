@@ -568,7 +568,8 @@ class Contacts:
         """Counting sort of the listed cells (active_list[0:n_active]) by colour into
         ``by_colour``: colour c's cells are by_colour[colour_start[c]:colour_start[c+1]]
         (order inside a colour is thread-dependent and irrelevant: its blocks are
-        disjoint). Call at kernel top level."""
+        disjoint). Call at kernel top level (or where everything runs serially, as in
+        the fused step)."""
         for c in ti.static(range(len(self.colours) + 1)):
             self.colour_start[c] = 0
         ti.loop_config(serialize=ti.static(self.serial_light or serial))

@@ -16,10 +16,10 @@ from .walls import Motion
 
 class FusedStep:
     """A whole step of a small system on the CPU, where every loop runs serially
-    anyway, in one or two kernel launches instead of ~5 + 2 per sweep + 3 per
-    projection iteration (each ~30-50 us with its read-back, which dominate a step of a
-    few thousand spheres: in ``tools/peer_lammps.py``, 1,000 spheres piling on the floor
-    ran 1.19 instead of 1.72 wall s per simulated s).
+    anyway, in one kernel launch (two when the projection is due) besides the counter
+    read-back, instead of 3 + one per sweep + 3 per projection iteration (each ~30-50
+    us, which dominate a step of a few thousand spheres: in ``tools/peer_lammps.py``,
+    1,000 spheres piling on the floor ran 1.19 instead of 1.72 wall s per simulated s).
 
     ``step(h, max_sweeps)``: drift and walls, grid build, detection, detect/resolve
     sweeps until no approaching overlap is left or ``max_sweeps``, or until a sphere
@@ -41,7 +41,7 @@ class FusedStep:
         params = contacts.params
 
         @ti.kernel
-        def step(h: real, max_sweeps: ti.i32) -> ti.i32:
+        def step(h: real, max_sweeps: ti.i32, tol: ti.f64) -> ti.i32:
             params.h[None] = h
             motion._drift_body()
             grid._build_body()
@@ -60,23 +60,25 @@ class FusedStep:
                 overlap = ti.max(overlap, params.vals[OPEN_OVERLAP])
             due = 0
             # compared in f64, as the Python step compares its float copies (same bits)
-            if ti.cast(overlap, ti.f64) > ti.cast(ti.static(tolerance), ti.f64) and \
+            if ti.cast(overlap, ti.f64) > tol and \
                     (params.count[REMAINING] > 0 or ti.static(supports)):
                 due = 1
             return 4 * sweeps + 2 * far + due
 
         @ti.kernel
-        def project():
+        def project(tol: ti.f64):
             params.count[PROJECTED] = 1
             it = 0
             while it < MAX_ITERATIONS:
                 grid._build_body()
                 projection._project_body()
                 params.vals[PROJ_WORST] = projection.worst[None]
-                if ti.cast(projection.worst[None], ti.f64) <= ti.cast(ti.static(tolerance), ti.f64):
+                if ti.cast(projection.worst[None], ti.f64) <= tol:
                     break
                 params.count[PROJECTED_PAIRS] += projection.pushed[None]
                 it += 1
 
-        self.step = step
-        self.project = project
+        # the tolerance goes in as an f64 argument: compared exactly as the Python step
+        # compares its float copies, in f32 builds too
+        self.step = lambda h, max_sweeps: step(h, max_sweeps, tolerance)
+        self.project = lambda: project(tolerance)

@@ -46,13 +46,13 @@ class StepParams:
 
     rest_speed [m/s]: pair approach speed below which e = 0 (0: rule off).
     up: unit vector against gravity (zero without gravity).
-    count: (N_COUNTS,) i32 — remaining approaching overlaps, pair and wall
+    count: N_COUNTS i32 slots (:class:`Slots`) — remaining approaching overlaps, pair and wall
         collisions, wall rest clamps, spheres with more than one collision, pair
         collisions made perfectly inelastic by the rest rule, of which against a
         supported sphere, spheres supported by the floor, in the current step; of a
         fused step (fused.py) also: 1 if it ran the overlap projection, and the pairs
         the projection pushed.
-    vals: (N_VALS,) real — max relative overlap of separating pairs, of
+    vals: N_VALS real slots — max relative overlap of separating pairs, of
         approaching pairs in the last detection, max |v|^2, max distance moved;
         kinetic energy removed by pair restitution, by wall restitution, by the
         rest rule [J]; collisional virial sum r_ij . dp_i [J s] (all in this step);

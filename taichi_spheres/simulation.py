@@ -78,8 +78,8 @@ class Simulation:
     optional feature in even when the scene does not need it (same results; for
     measuring what compiling them out saves). fused: for systems small enough that
     the CPU runs every loop serially (below 3,000 spheres), run each step as one or
-    two kernel launches (fused.py; same bits, several times faster where steps have
-    many sweeps, as in piles), at the price of compiling its kernels once per scene
+    two kernel launches (fused.py; same bits; 1,000 spheres piling up ran 1.45x
+    faster in tools/peer_lammps.py), at the price of compiling its kernels once per scene
     (~10-60 s on 2 cores; Taichi's offline cache keeps them for later runs); ignored
     elsewhere. Off by default: worth it for long or repeated runs.
     """
@@ -97,6 +97,8 @@ class Simulation:
             raise ValueError(f"max_sweeps must be a positive int, got {max_sweeps!r}")
         if not isinstance(fused, bool):
             raise ValueError(f"fused must be True or False, got {fused!r}")
+        if not isinstance(compile_all, bool):
+            raise ValueError(f"compile_all must be True or False, got {compile_all!r}")
         self.scene = scene
         self.step_fraction = step_fraction
         self.max_sweeps = max_sweeps
@@ -123,15 +125,15 @@ class Simulation:
         self._grid = Grid(self.geometry, self._state, serial_light)
         self._contacts = Contacts(self._state, self._grid, self._params, self._motion,
                                   self.features, serial_light, serial_heavy, serial_few=cpu)
-        self.overlap_tolerance = DEFAULT_TOLERANCE
+        self._overlap_tolerance = DEFAULT_TOLERANCE
         self._projection = Projection(self._state, self._grid, self._contacts, self._motion,
-                                      self.features, serial_light, self.overlap_tolerance)
+                                      self.features, serial_light, self._overlap_tolerance)
         # small CPU systems can run each step in one or two serial kernels (fused.py)
         self._fused = None
         if fused and self._contacts.serial_heavy:
             self._fused = FusedStep(self._motion, self._grid, self._contacts,
                                     self._projection, real, self.features.supports,
-                                    self.overlap_tolerance)
+                                    self._overlap_tolerance)
         self._r_min = float(scene.radius.min())
         self._g = float(np.linalg.norm(scene.gravity))
         self.time = 0.0
@@ -152,6 +154,17 @@ class Simulation:
     @property
     def n(self) -> int:
         return self.scene.n
+
+    @property
+    def fused(self) -> bool:
+        """True when steps run as a fused kernel (asked for, CPU, below 3,000 spheres)."""
+        return self._fused is not None
+
+    @property
+    def overlap_tolerance(self) -> float:
+        """Relative overlap above which the projection pushes pairs apart (fixed when the
+        kernels are built: projection.DEFAULT_TOLERANCE)."""
+        return self._overlap_tolerance
 
     @property
     def stats(self) -> dict:

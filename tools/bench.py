@@ -73,9 +73,12 @@ def _field_nbytes(field) -> int:
 
 def field_bytes(sim) -> int:
     """Bytes of the Taichi fields a Simulation allocated [bytes], computed from their
-    shapes and dtypes (fields held by its state, parameters, motion, grid, contacts)."""
+    shapes and dtypes (fields held by its state, parameters and their counter slots,
+    motion, grid, contacts, projection)."""
     seen, total = set(), 0
-    for part in (sim._state, sim._params, sim._motion, sim._grid, sim._contacts):
+    parts = (sim._state, sim._params, sim._params.count, sim._params.vals, sim._motion,
+             sim._grid, sim._contacts, sim._projection)
+    for part in parts:
         for value in vars(part).values():
             for item in value if isinstance(value, (list, tuple)) else (value,):
                 if isinstance(item, ti.Field) and id(item) not in seen:
@@ -228,7 +231,7 @@ def measure(scene, arch, precision, min_seconds, blocks=3, render=False) -> dict
                step_ms=secs / steps * 1e3, stages_ms=stages_ms, same_ms=same_ms,
                stage_sum_ms=sum(stages_ms.values()), bare_ms=bare_ms,
                ratio=same_ms / bare_ms, sweeps=best["sweeps"] / steps,
-               fused=sim._fused is not None, **info)
+               fused=sim.fused, **info)
     if render:
         row["render_ms"], row["render_error"] = render_ms(sim, scene)
     return row

