@@ -86,7 +86,7 @@ def run(scene, t_end, samples=12):
 
 
 def markdown(rows, command, total):
-    out = [f"# Resting contact\n",
+    out = ["# Resting contact\n",
            f"Generated {datetime.date.today().isoformat()} on {cpu_name()} (CPU backend, f64) "
            f"by `{command}` in {total:.0f} s. Rules: README \"Resting contact and inelastic "
            f"collapse\".\n",
