@@ -77,6 +77,9 @@ def build_parser():
     run.add_argument("--resume", default=None, metavar="CHECKPOINT",
                      help="continue a run from its OUT.ckpt.npz; the result is bit-identical "
                           "to an uninterrupted run with the same options")
+    run.add_argument("--fused", action="store_true",
+                     help="run each step as one fused kernel (CPU, below 3,000 spheres): "
+                          "faster steps after a one-off compile of 10-60 s; same results")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     info = sub.add_parser("info", help="validate a scene and show what it compiles in")
     info.add_argument("scene")
@@ -196,7 +199,8 @@ def cmd_run(scene: Scene, args):
         sim = Simulation(scene, arch=args.arch,
                          precision=args.precision or physics.get("precision"),
                          step_fraction=physics.get("step_fraction", DEFAULT_STEP_FRACTION),
-                         max_sweeps=physics.get("max_sweeps", DEFAULT_MAX_SWEEPS))
+                         max_sweeps=physics.get("max_sweeps", DEFAULT_MAX_SWEEPS),
+                         fused=args.fused)
         start_frame = 0
         if args.resume:
             start_frame = checkpoint.load(args.resume, sim, scene, fps) + 1

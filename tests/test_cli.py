@@ -126,6 +126,14 @@ def test_resume_refuses_another_scene(tiny_run):
     assert r.returncode == 2 and "different scene" in r.stderr
 
 
+def test_fused_run_writes_the_same_diagnostics(tiny_run):
+    """--fused (one kernel per step on the CPU) changes the speed, not the numbers."""
+    d, _ = tiny_run
+    r = cli("run", "tiny.toml", "-o", "fused.mp4", "--no-video", "--fused", "--quiet", cwd=d)
+    assert r.returncode == 0, r.stderr
+    assert read_csv(d / "fused.csv") == read_csv(d / "full.csv")
+
+
 def test_interrupt_keeps_a_playable_video(tmp_path, vulkan):
     import imageio.v2 as imageio
     (tmp_path / "tiny.toml").write_text(TINY.replace("duration = 0.5", "duration = 600.0"))
