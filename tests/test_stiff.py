@@ -129,19 +129,25 @@ def test_fused_step_matches_step_kernel_by_kernel(arch):
     projection included): a forming pile (sweep-limit steps, projections, wall
     placements) gives the same bits and the same counters as the step launched kernel
     by kernel."""
+    stats = _fused_matches_kernel_by_kernel(arch, _pour(120), lambda sim: 0.6)
+    assert stats["projected_steps"] > 0 and stats["sweep_limit_hits"] > 0
+
+
+def _fused_matches_kernel_by_kernel(arch, scene, duration, **options):
+    """Run ``scene`` for ``duration(sim)`` seconds with and without the fused step;
+    assert the same bits and counters; return the counters."""
     if arch != "cpu":
         pytest.skip("the fused step is for the CPU")
-    scene = _pour(120)
     runs = []
     for fused in (True, False):
-        sim = ts.Simulation(scene, arch=arch, fused=fused)
+        sim = ts.Simulation(scene, arch=arch, fused=fused, **options)
         assert sim.fused == fused
-        sim.advance(0.6)
+        sim.advance(duration(sim))
         runs.append((sim.state(), sim.stats))
     (a, stats_a), (b, stats_b) = runs
-    assert stats_a["projected_steps"] > 0 and stats_a["sweep_limit_hits"] > 0
     assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
     assert stats_a == stats_b
+    return stats_a
 
 
 @pytest.mark.slow
@@ -386,15 +392,7 @@ def test_fused_step_hands_over_to_kernels_after_a_rebuild(arch):
     """When a sphere moves farther than the grid's margin within a step (a dense
     inelastic gas at step_fraction 0.5), the fused step stops, the step goes on kernel
     by kernel after re-binning, and the result is the same bits as kernel by kernel."""
-    if arch != "cpu":
-        pytest.skip("the fused step is for the CPU")
     scene = gas(300, packing=0.4, periodic=True, restitution=0.7, seed=1)
-    runs = []
-    for fused in (True, False):
-        sim = ts.Simulation(scene, arch=arch, fused=fused, step_fraction=0.5)
-        sim.advance(30 * sim.max_step())
-        runs.append((sim.state(), sim.stats))
-    (a, stats_a), (b, stats_b) = runs
-    assert stats_a["grid_rebuilds"] > 0
-    assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
-    assert stats_a == stats_b
+    stats = _fused_matches_kernel_by_kernel(arch, scene, lambda sim: 30 * sim.max_step(),
+                                            step_fraction=0.5)
+    assert stats["grid_rebuilds"] > 0
