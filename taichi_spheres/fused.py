@@ -68,15 +68,18 @@ class FusedStep:
         @ti.kernel
         def project(tol: ti.f64):
             params.count[PROJECTED] = 1
-            it = 0
-            while it < MAX_ITERATIONS:
-                grid._build_body()
-                projection._project_body()
-                params.vals[PROJ_WORST] = projection.worst[None]
-                if ti.cast(projection.worst[None], ti.f64) <= tol:
-                    break
+            grid._build_body()
+            projection._project_all_body()
+            it = 1
+            while ti.cast(projection.worst[None], ti.f64) > tol:
                 params.count[PROJECTED_PAIRS] += projection.pushed[None]
+                if it == MAX_ITERATIONS:
+                    break
+                grid._build_body()
+                projection._project_near_body()
                 it += 1
+            projection._finish_body()
+            params.vals[PROJ_WORST] = projection.worst[None]
 
         # the tolerance goes in as an f64 argument: compared exactly as the Python step
         # compares its float copies, in f32 builds too

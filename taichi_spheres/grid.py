@@ -25,6 +25,8 @@ from .state import SphereState
 __all__ = ["GridGeometry", "Grid", "BLOCK_PAIRS", "FORWARD_ROWS", "ALL_ROWS", "SCAN_BLOCK"]
 
 SCAN_BLOCK = 1024
+#: At most about this many cells per sphere: dilute scenes keep memory O(N).
+MAX_CELLS_PER_SPHERE = 8.0
 
 
 def _block_pairs():
@@ -77,9 +79,16 @@ class GridGeometry:
     @classmethod
     def for_box(cls, lo, hi, periodic, r_max, r_min, n, step_fraction):
         slack = step_fraction * r_min
+        # the grid is built after the drift, so the margin is for the moves that come
+        # after it: a collision carried forward can move a sphere by up to twice a step's
+        # largest move (relative speed up to twice the largest speed); a narrower margin
+        # makes re-binnings mid-step common in dense gases (min_cell is what the
+        # stencil needs, wide_cell what the grid aims at)
         min_cell = 2.0 * r_max + 2.0 * slack
-        # no more cells than about one per sphere: dilute scenes keep memory O(N)
-        target = max(min_cell, (math.prod(h - l for l, h in zip(lo, hi)) / max(n, 1)) ** (1 / 3))
+        wide_cell = 2.0 * r_max + 4.0 * slack
+        # no more cells than MAX_CELLS_PER_SPHERE per sphere: dilute scenes keep memory O(N)
+        volume = math.prod(h - l for l, h in zip(lo, hi))
+        target = max(wide_cell, (volume / (MAX_CELLS_PER_SPHERE * max(n, 1))) ** (1 / 3))
         dims, cell = [], []
         for a in range(3):
             length = hi[a] - lo[a]

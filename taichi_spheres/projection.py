@@ -13,6 +13,15 @@ move and the potential energy in uniform gravity does not change; velocities are
 touched (an approaching pair is collided by the next step's sweeps). A sphere pushed
 past a wall is then put back by the walls' energy-safe placement
 (:meth:`taichi_spheres.walls.Motion.walls_and_wrap`).
+
+Only the first iteration scans every sphere. A pair's overlap changes only if one of
+its spheres moved, and only spheres in a pair above tolerance (*involved*) move, so a
+later iteration examines just the spheres within the 27-cell stencil of the spheres
+involved in the iteration before: every other pair is unchanged and below tolerance.
+Each examined sphere's push is computed over all its pairs as in a full scan, so the
+positions are the same bits as with a full scan every iteration (``NEAR_SETS = False``,
+tests), and so are the pushed-pair counts and the largest overlap, which is kept per
+sphere (``rmax``) and reduced over all spheres once at the end.
 """
 
 import taichi as ti
@@ -28,13 +37,21 @@ DEFAULT_TOLERANCE = 1e-4
 MAX_ITERATIONS = 8
 #: Jacobi relaxation: each iteration removes this fraction of every pair's overlap.
 RELAXATION = 0.5
+#: Later iterations examine only the neighbourhood of the spheres involved before
+#: (False: every sphere, every iteration; read when a Projection is built; tests).
+NEAR_SETS = True
 
 
 @ti.data_oriented
 class Projection:
     """Fields: push (N,) vec3 real — displacement of each sphere in this iteration [m];
-    worst (0-d) real — largest relative overlap seen by the last iteration (before its
-    push); pushed (0-d) i32 — pairs pushed by the last iteration."""
+    rmax (N,) real — largest relative overlap of each sphere's pairs when it was last
+    examined (exact for every sphere, see the module docstring); involved (N,) /
+    n_involved — spheres with a pair above tolerance in the last iteration; near (N,) /
+    n_near — the spheres the next iteration examines, marked by ``stamp`` (N,) i32 =
+    the iteration that listed them; worst (0-d) real — largest relative overlap the
+    last iteration measured (before its push) among the pairs it examined, or over all
+    spheres after ``finish``; pushed (0-d) i32 — pairs pushed by the last iteration."""
 
     def __init__(self, state: SphereState, grid: Grid, contacts: Contacts, motion: Motion,
                  features: Features, serial: bool, tolerance: float):
@@ -47,58 +64,147 @@ class Projection:
         self.n = state.n
         self.serial = serial
         self.tolerance = tolerance
+        self.near_sets = NEAR_SETS
         self.push = ti.Vector.field(3, self.real, shape=self.n)
+        self.rmax = ti.field(self.real, shape=self.n)
+        self.involved = ti.field(ti.i32, shape=self.n)
+        self.n_involved = ti.field(ti.i32, shape=())
+        self.near = ti.field(ti.i32, shape=self.n)
+        self.n_near = ti.field(ti.i32, shape=())
+        self.stamp = ti.field(ti.i32, shape=self.n)
+        self.iteration = ti.field(ti.i32, shape=())
         self.worst = ti.field(self.real, shape=())
         self.pushed = ti.field(ti.i32, shape=())
+        self.stamp.fill(-1)
 
         @ti.kernel
-        def project_once():
-            self._project_body()
+        def project_all():
+            self._project_all_body()
 
-        self.project_once = project_once
+        @ti.kernel
+        def project_near():
+            self._project_near_body()
+
+        @ti.kernel
+        def finish():
+            self._finish_body()
+
+        self.project_all = project_all
+        self.project_near = project_near
+        self.finish = finish
 
     @ti.func
-    def _project_body(self):
-        """One Jacobi iteration: measure every overlap, push pairs above tolerance apart
-        by RELAXATION x their overlap, then put spheres back inside the box."""
-        self.worst[None] = 0
-        self.pushed[None] = 0
-        tol = ti.cast(ti.static(self.tolerance), self.real)
+    def _project_all_body(self):
+        """First iteration: measure every overlap, push pairs above tolerance apart by
+        RELAXATION x their overlap, then put spheres back inside the box."""
+        self._begin_iteration()
         ti.loop_config(serialize=ti.static(self.serial))
         for p in range(self.n):
-            i = self.grid.order[p]
-            ci = self.grid.coords(self.grid.cell_of[i])
-            xi = self.state.x[i]
-            acc = ti.Vector.zero(self.real, 3)
-            wi_num = ti.cast(1, self.real)
-            if ti.static(not self.f.equal_masses):
-                wi_num = self.state.inv_mass_of(i)
-            for k in range(ti.static(len(ALL_ROWS))):
-                a0, b0, a1, b1 = self.grid.row_ranges(ci, self.contacts.all_rows[k])
-                for q in range(a0, b0):
-                    acc += self.pair_push(xi, i, self.grid.order[q], wi_num, tol)
-                for q in range(a1, b1):
-                    acc += self.pair_push(xi, i, self.grid.order[q], wi_num, tol)
-            self.push[i] = acc
+            self.examine(self.grid.order[p])
+        self._apply()
+
+    @ti.func
+    def _project_near_body(self):
+        """A later iteration: the same for the spheres near those involved before."""
+        if ti.static(self.near_sets):
+            self.iteration[None] += 1
+            self.n_near[None] = 0
+            ti.loop_config(serialize=ti.static(self.serial))
+            for t in range(self.n_involved[None]):
+                self.list_around(self.involved[t])
+            self._begin_iteration()
+            ti.loop_config(serialize=ti.static(self.serial))
+            for t in range(self.n_near[None]):
+                self.examine(self.near[t])
+            self._apply()
+        else:
+            self._project_all_body()
+
+    @ti.func
+    def _finish_body(self):
+        """worst = the largest relative overlap over all spheres (after the last
+        iteration: the same value as a full scan would have measured in it)."""
+        self.worst[None] = 0
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.n):
+            ti.atomic_max(self.worst[None], self.rmax[i])
+
+    @ti.func
+    def _begin_iteration(self):
+        self.worst[None] = 0
+        self.pushed[None] = 0
+        self.n_involved[None] = 0
+
+    @ti.func
+    def _apply(self):
+        """Move the involved spheres by their push and put them back inside the box."""
+        ti.loop_config(serialize=ti.static(self.serial))
+        for t in range(self.n_involved[None]):
+            i = self.involved[t]
             dx = self.push[i]
             if dx.norm_sqr() > 0:
                 self.state.x[i] += dx
                 self.motion.walls_and_wrap(i)
 
     @ti.func
+    def list_around(self, i):
+        """Add every sphere of the 27 cells around sphere i (i included) to ``near``,
+        once per iteration."""
+        ci = self.grid.coords(self.grid.cell_of[i])
+        it = self.iteration[None]
+        for k in range(ti.static(len(ALL_ROWS))):
+            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.contacts.all_rows[k])
+            for q in range(a0, b0):
+                self.list_once(self.grid.order[q], it)
+            for q in range(a1, b1):
+                self.list_once(self.grid.order[q], it)
+
+    @ti.func
+    def list_once(self, j, it):
+        if ti.atomic_max(self.stamp[j], it) < it:
+            self.near[ti.atomic_add(self.n_near[None], 1)] = j
+
+    @ti.func
+    def examine(self, i):
+        """push[i] and rmax[i] from all pairs of sphere i; list i as involved if one of
+        its pairs is above tolerance."""
+        tol = ti.cast(ti.static(self.tolerance), self.real)
+        ci = self.grid.coords(self.grid.cell_of[i])
+        xi = self.state.x[i]
+        acc = ti.Vector.zero(self.real, 3)
+        worst = ti.cast(0, self.real)
+        wi_num = ti.cast(1, self.real)
+        if ti.static(not self.f.equal_masses):
+            wi_num = self.state.inv_mass_of(i)
+        for k in range(ti.static(len(ALL_ROWS))):
+            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.contacts.all_rows[k])
+            for q in range(a0, b0):
+                dx, rel = self.pair_push(xi, i, self.grid.order[q], wi_num, tol)
+                acc += dx
+                worst = ti.max(worst, rel)
+            for q in range(a1, b1):
+                dx, rel = self.pair_push(xi, i, self.grid.order[q], wi_num, tol)
+                acc += dx
+                worst = ti.max(worst, rel)
+        self.push[i] = acc
+        self.rmax[i] = worst
+        ti.atomic_max(self.worst[None], worst)
+        if worst > tol:
+            self.involved[ti.atomic_add(self.n_involved[None], 1)] = i
+
+    @ti.func
     def pair_push(self, xi, i, j, wi_num, tol):
-        """Displacement of sphere i [m] from its overlap with j (zero below tolerance):
-        RELAXATION x overlap along the line of centres, times i's inverse-mass weight."""
+        """(displacement of sphere i [m] from its overlap with j, zero below tolerance:
+        RELAXATION x overlap along the line of centres, times i's inverse-mass weight;
+        relative overlap 1 - |d|/sigma, 0 if they do not overlap)."""
         out = ti.Vector.zero(self.real, 3)
+        rel = ti.cast(0, self.real)
         if j != i:
             d, sigma = self.contacts.separation_from(xi, i, j)
             dd = d.norm_sqr()
             if dd < sigma * sigma:
                 dist = ti.sqrt(dd)
                 rel = 1 - dist / sigma
-                ti.atomic_max(self.worst[None], rel)
                 if rel > tol and dist > 0:
                     w = ti.cast(0.5, self.real)
                     if ti.static(not self.f.equal_masses):
@@ -106,4 +212,4 @@ class Projection:
                     out = ti.cast(RELAXATION, self.real) * w * (sigma - dist) / dist * d
                     if i < j:
                         ti.atomic_add(self.pushed[None], 1)
-        return out
+        return out, rel

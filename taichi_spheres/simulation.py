@@ -364,16 +364,15 @@ class Simulation:
         """Push apart pairs overlapping beyond the tolerance (projection.py); returns
         the largest relative overlap the last iteration measured."""
         proj = self._projection
-        worst = 0.0
-        for _ in range(MAX_ITERATIONS):
+        for it in range(MAX_ITERATIONS):
             self._grid.build()
-            proj.project_once()
-            worst = float(proj.worst[None])
-            if worst <= self.overlap_tolerance:
+            (proj.project_near if it else proj.project_all)()
+            if float(proj.worst[None]) <= self.overlap_tolerance:
                 break
             self._totals["projected_pairs"] += int(proj.pushed[None])
+        proj.finish()
         self._totals["projected_steps"] += 1
-        return worst
+        return float(proj.worst[None])
 
     # ---- introspection used by tests and tools ----
     def grid_overlaps(self) -> np.ndarray:

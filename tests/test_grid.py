@@ -168,3 +168,26 @@ def test_row_stencils_cover_the_half_and_full_stencils():
     # every unordered neighbour pair is seen once: o or -o, never both
     assert all(tuple(-c for c in o) not in half for o in half if o != (0, 0, 0))
     assert cells(ALL_ROWS) == sorted(itertools.product((-1, 0, 1), repeat=3))
+
+
+def test_cell_size_rules():
+    """Cells: at least 2 r_max + 4 x (step_fraction r_min) where the box allows it (a
+    collision carried forward can move a sphere by twice a step's largest move), down
+    to 2 r_max + 2 x that on a short periodic axis; at most about MAX_CELLS_PER_SPHERE
+    cells per sphere in dilute scenes; with fewer, larger cells the margin (slack) is
+    what the cells leave beyond a diameter."""
+    from taichi_spheres.grid import MAX_CELLS_PER_SPHERE
+    r, f = 0.5, 0.1
+    dense = GridGeometry.for_box((0, 0, 0), (60, 60, 60), (True,) * 3, r, r, 200_000, f)
+    assert min(dense.cell) >= 2 * r + 4 * f * r
+    assert dense.slack == pytest.approx(0.5 * (min(dense.cell) - 2 * r))
+    # a pile-like box: 1e4 spheres of r = 0.015 in 3.2 x 3.2 x 1 m
+    dilute = GridGeometry.for_box((0, 0, 0), (3.2, 3.2, 1.0), (False,) * 3, 0.015, 0.015,
+                                  10_000, f)
+    assert dilute.n_cells <= 1.5 * MAX_CELLS_PER_SPHERE * 10_000
+    assert dilute.n_cells >= 0.5 * MAX_CELLS_PER_SPHERE * 10_000
+    # 3.4 m periodic: 3 cells of 1.1 (2 r + 2 f r) fit, 3 of 1.2 would not
+    short = GridGeometry.for_box((0, 0, 0), (3.4, 3.4, 3.4), (True,) * 3, r, r, 20, f)
+    assert short.dims == (3, 3, 3)
+    with pytest.raises(ValueError, match="periodic axis x"):
+        GridGeometry.for_box((0, 0, 0), (3.2, 3.4, 3.4), (True,) * 3, r, r, 20, f)

