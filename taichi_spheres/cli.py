@@ -117,10 +117,11 @@ def cmd_info(scene: Scene, args):
     rest_speed = rest_speed_for(scene, fraction)
     features = Features.from_scene(scene, rest_speed)
     real = 8 if precision == "f64" else 4
-    # x, v, moved, earliest + modified, hits, order, cell_of, touched (+ support)
-    per_sphere = 6 * real + 2 * real + 5 * 4 + (4 if features.supports else 0)
+    # x, v, grid.xs, projection push (4 vec3), moved, earliest, projection rmax; hits,
+    # marked, touched, order, cell_of, slot, projection involved/near/stamp (+ support)
+    per_sphere = 12 * real + 3 * real + 9 * 4 + (4 if features.supports else 0)
     per_sphere += (0 if features.equal_radii else real) + (0 if features.equal_masses else real)
-    per_cell = 4 * 4                                 # start, cursor, active, scan
+    per_cell = 7 * 4   # start, cursor; active, first_pair (2), active_list, by_colour
     memory = scene.n * per_sphere + geom.n_cells * per_cell
     print(f"scene: {scene.name} ({scene.meta.get('source', '')})")
     print(f"spheres: {scene.n}, radius {scene.radius.min():g}..{scene.radius.max():g} m, "

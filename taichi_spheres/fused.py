@@ -46,15 +46,8 @@ class FusedStep:
             motion._drift_body()
             grid._build_body()
             contacts._detect_all_body()
-            sweeps = 0
-            far = 0
-            while params.count[REMAINING] > 0 and sweeps < max_sweeps:
-                contacts.resolve_colours_serially()
-                contacts.after_sweep(True)
-                sweeps += 1
-                if contacts.status() % 2 == 1:
-                    far = 1
-                    break
+            sweeps = contacts.serial_sweeps(max_sweeps)
+            far = contacts.status() % 2
             overlap = params.vals[SEP_OVERLAP]
             if params.count[REMAINING] > 0:
                 overlap = ti.max(overlap, params.vals[OPEN_OVERLAP])

@@ -140,6 +140,10 @@ class Grid:
             ``order[start[c]:start[c+1]]``, sorted by id (deterministic on every arch)
         order: (N,) i32 sphere ids by cell;  cell_of: (N,) i32 linear cell of sphere
         cursor: (M,) i32 scatter cursors;  scan_levels: block sums of the scan
+        xs: (N,) vec3 — positions in ``order`` (xs[p] = x[order[p]]) [m], so that a
+            neighbour scan walks a row of cells through contiguous memory; slot: (N,)
+            i32 — where sphere i sits in ``order``. Whoever moves a sphere after the
+            build must call :meth:`refresh` for it before the next scan.
     """
 
     def __init__(self, geom: GridGeometry, state: SphereState, serial_light: bool):
@@ -153,6 +157,8 @@ class Grid:
         self.cursor = ti.field(ti.i32, shape=self.m)
         self.order = ti.field(ti.i32, shape=self.n)
         self.cell_of = ti.field(ti.i32, shape=self.n)
+        self.xs = ti.Vector.field(3, self.real, shape=self.n)
+        self.slot = ti.field(ti.i32, shape=self.n)
         # multi-level blocked exclusive scan: level k scans sizes[k] items of bufs[k]
         self.scan_sizes = [self.m]
         self.scan_bufs = [self.start]
@@ -327,3 +333,13 @@ class Grid:
                     self.order[q + 1] = self.order[q]
                     q -= 1
                 self.order[q + 1] = key
+        ti.loop_config(serialize=ti.static(self.serial_light))
+        for p in range(self.n):
+            i = self.order[p]
+            self.slot[i] = p
+            self.xs[p] = self.state.x[i]
+
+    @ti.func
+    def refresh(self, i):
+        """Copy sphere i's current position into ``xs`` (after it moved)."""
+        self.xs[self.slot[i]] = self.state.x[i]

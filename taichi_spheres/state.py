@@ -104,7 +104,6 @@ class SphereState:
         x, v: (N,) vec3 real — centre [m] and velocity [m/s]
         radius: (N,) real, only without equal radii [m]
         inv_mass: (N,) real, only without equal masses [1/kg]
-        modified: (N,) i32 — touched by a collision in the current sweep
         moved: (N,) real — bound on the distance moved since the grid was built [m]
         hits: (N,) i32 — pair and wall collisions in the current step
         support: (N,) i32, only with features.supports — 1 when the sphere rests on
@@ -124,7 +123,6 @@ class SphereState:
         self.v = ti.Vector.field(3, real, shape=n)
         self.radius = None if features.equal_radii else ti.field(real, shape=n)
         self.inv_mass = None if features.equal_masses else ti.field(real, shape=n)
-        self.modified = ti.field(ti.i32, shape=n)
         self.moved = ti.field(real, shape=n)
         self.hits = ti.field(ti.i32, shape=n)
         self.support = ti.field(ti.i32, shape=n) if features.supports else None

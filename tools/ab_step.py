@@ -1,0 +1,89 @@
+#!/usr/bin/env python3
+"""Paired A/B timing of a tuning constant of the engine, in one process.
+
+Builds two Simulations of the same elastic gas (tools/bench.py's scene: packing 0.3,
+periodic cube), the second with module constants patched while its kernels compile
+(they read them through ``ti.static``), then times their steps alternately, A then B
+then B then A, ..., so that the drift of a shared machine's speed (+-25 % from minute
+to minute here) hits both alike. Reports the median of the per-pair ratios B/A with
+its quartiles, and checks that both runs made the same collisions (the constants
+tried here change speed, not physics).
+
+    python tools/ab_step.py --n 100000 contacts.DENSE_TOUCHED=1
+    python tools/ab_step.py --n 100000 --shuffle contacts.DENSE_TOUCHED=1
+
+--shuffle numbers the spheres in random order (the bench's lattice numbers them in
+about the grid's cell order, which favours memory locality).
+"""
+import argparse
+import importlib
+import os
+import sys
+import time
+from unittest import mock
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("patches", nargs="+", metavar="module.NAME=value",
+                    help="constants of taichi_spheres modules to set for run B")
+    ap.add_argument("--n", type=int, default=100_000)
+    ap.add_argument("--steps", type=int, default=60, help="timed steps per run")
+    ap.add_argument("--precision", default="f64")
+    ap.add_argument("--shuffle", action="store_true")
+    args = ap.parse_args()
+
+    import taichi as ti
+    import taichi_spheres as ts
+    from taichi_spheres import runtime
+    from taichi_spheres.builders import gas
+
+    patches = []
+    for item in args.patches:
+        name, _, value = item.partition("=")
+        mod, _, attr = name.rpartition(".")
+        module = importlib.import_module(f"taichi_spheres.{mod}")
+        if not mod or not hasattr(module, attr):
+            ap.error(f"{name}: no such constant in taichi_spheres")
+        patches.append(mock.patch.object(module, attr, type(getattr(module, attr))(value)))
+
+    runtime.ensure("cpu", args.precision)
+    scene = gas(args.n)
+    if args.shuffle:
+        p = np.random.default_rng(1).permutation(args.n)
+        scene = ts.Scene.from_arrays(scene.x[p], scene.v[p], scene.radius[p],
+                                     box=(scene.box_lo, scene.box_hi), periodic=scene.periodic)
+    sims = [ts.Simulation(scene, precision=args.precision) for _ in range(2)]
+    for k, sim in enumerate(sims):
+        for p in patches if k else []:
+            p.start()
+        for _ in range(5):      # compiles with the constants of its run
+            sim.step(sim.max_step())
+        for p in reversed(patches) if k else []:
+            p.stop()
+    times = [[], []]
+    for rep in range(args.steps):
+        for k in (rep % 2, 1 - rep % 2):
+            sim = sims[k]
+            h = sim.max_step()
+            ti.sync()
+            t0 = time.perf_counter()
+            sim.step(h)
+            ti.sync()
+            times[k].append(time.perf_counter() - t0)
+    a, b = (np.array(t) * 1e3 for t in times)
+    q1, med, q3 = np.percentile(b / a, [25, 50, 75])
+    same = all(sims[0].stats[k] == sims[1].stats[k] for k in ("pair_collisions", "sweeps"))
+    print(f"N={args.n} {args.precision}{' shuffled' if args.shuffle else ''}, B: {' '.join(args.patches)}")
+    print(f"A median {np.median(a):.2f} ms/step, B median {np.median(b):.2f} ms/step; "
+          f"B/A per pair: median {med:.3f} (quartiles {q1:.3f}-{q3:.3f}); "
+          f"same collisions: {same}")
+
+
+if __name__ == "__main__":
+    main()
