@@ -60,8 +60,8 @@ MAX_BLOCK_COLLISIONS = 64
 
 #: A re-detection visits the touched spheres in cell order (reading every sphere's
 #: flag) when more than 1 in this many spheres were touched, else in list order
-#: (at N = 1e5 on the 2-core CPU the step ran ~5 % faster with 256 than with 32, and
-#: the same with 4096 as when always in cell order; in a paired A/B run, scratch).
+#: (cell order pays off even for a few hundred touched spheres at N = 1e5 on the
+#: 2-core CPU; compare values with ``python tools/ab_step.py contacts.DENSE_TOUCHED=K``).
 DENSE_TOUCHED = 4096
 
 
@@ -484,7 +484,9 @@ class Contacts:
         and cache lines, which in list order (random in space) cost a cache miss per
         row; with few, the list is cheaper than reading every flag."""
         n_t = self.n_touched[None]
-        dense = n_t > ti.static(self.n // DENSE_TOUCHED)   # (no i32 overflow)
+        # below DENSE_TOUCHED spheres always in cell order: the list branch is not
+        # compiled at all (compile time of the fused step)
+        dense = ti.static(self.n < DENSE_TOUCHED) or n_t > ti.static(self.n // DENSE_TOUCHED)
         if dense:
             n_t = self.n
         # one loop for both orders: a parallel loop costs its launch even when empty
@@ -492,7 +494,10 @@ class Contacts:
         for t in range(n_t):
             i = -1
             p = t
-            if dense:
+            if ti.static(self.n < DENSE_TOUCHED):
+                if self.marked[t] != 0:
+                    i = self.grid.order[t]
+            elif dense:
                 if self.marked[t] != 0:
                     i = self.grid.order[t]
             else:

@@ -47,10 +47,19 @@ def main():
     for item in args.patches:
         name, _, value = item.partition("=")
         mod, _, attr = name.rpartition(".")
-        module = importlib.import_module(f"taichi_spheres.{mod}")
-        if not mod or not hasattr(module, attr):
-            ap.error(f"{name}: no such constant in taichi_spheres")
-        patches.append(mock.patch.object(module, attr, type(getattr(module, attr))(value)))
+        try:
+            module = importlib.import_module(f"taichi_spheres.{mod}") if mod else None
+        except ImportError:
+            module = None
+        if module is None or not attr.isupper() or not hasattr(module, attr):
+            ap.error(f"{name}: not a constant of a taichi_spheres module (e.g. contacts.DENSE_TOUCHED)")
+        if not value:
+            ap.error(f"{name}: give a value, as {name}=VALUE")
+        kind = type(getattr(module, attr))
+        try:
+            patches.append(mock.patch.object(module, attr, kind(value)))
+        except ValueError:
+            ap.error(f"{name}: {value!r} is not a {kind.__name__}")
 
     runtime.ensure("cpu", args.precision)
     scene = gas(args.n)
