@@ -59,7 +59,8 @@ COLLAPSE_HITS = 4
 MAX_BLOCK_COLLISIONS = 64
 
 #: A re-detection visits the touched spheres in cell order (reading every sphere's
-#: flag) when more than 1 in this many spheres were touched, else in list order
+#: flag) when more than 1 in this many spheres were touched, else in list order;
+#: systems of fewer spheres always use cell order (the list branch is not compiled)
 #: (cell order pays off even for a few hundred touched spheres at N = 1e5 on the
 #: 2-core CPU; compare values with ``python tools/ab_step.py contacts.DENSE_TOUCHED=K``).
 DENSE_TOUCHED = 4096
@@ -446,6 +447,8 @@ class Contacts:
         ti.loop_config(serialize=ti.static(self.serial_light))
         for i in range(self.n):
             self.earliest[i] = -1
+            self.marked[i] = 0      # (slots; normally clear: after an interrupted sweep)
+        self.n_touched[None] = 0
         self.scan_forward(False)
 
     @ti.func
@@ -476,7 +479,7 @@ class Contacts:
         self.n_active[None] = 0
 
     @ti.func
-    def detect_from_modified(self, serial: ti.template()):
+    def detect_around_touched(self, serial: ti.template()):
         """Full-stencil scan (9 rows along z) from spheres touched in this sweep; a
         pair of two touched spheres is examined once, from the lower id. When many
         spheres were touched (more than 1 in DENSE_TOUCHED) they are visited in cell
@@ -653,8 +656,9 @@ class Contacts:
 
     @ti.func
     def after_sweep(self, serial: ti.template()):
-        """Put the spheres a sweep touched back inside the box, detect new approaching
-        overlaps around them, and clear their marks."""
+        """Put the spheres a sweep touched back inside the box (a wall bounce there
+        counts toward the grid's move bound, vals[MOVED]), copy their positions into
+        grid.xs, detect new approaching overlaps around them, and clear their marks."""
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
         for t in range(self.n_touched[None]):
             self.motion.walls_and_wrap(self.touched[t])
@@ -664,7 +668,7 @@ class Contacts:
             self.earliest[self.touched[t]] = -1
         self.params.reset_detection()
         self.clear_active(ti.static(self.serial_light or serial))
-        self.detect_from_modified(serial)
+        self.detect_around_touched(serial)
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
         for t in range(self.n_touched[None]):
             self.marked[self.grid.slot[self.touched[t]]] = 0

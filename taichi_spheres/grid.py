@@ -143,7 +143,8 @@ class Grid:
         xs: (N,) vec3 — positions in ``order`` (xs[p] = x[order[p]]) [m], so that a
             neighbour scan walks a row of cells through contiguous memory; slot: (N,)
             i32 — where sphere i sits in ``order``. Whoever moves a sphere after the
-            build must call :meth:`refresh` for it before the next scan.
+            build must call :meth:`refresh` for it (or build again) before the next
+            scan.
     """
 
     def __init__(self, geom: GridGeometry, state: SphereState, serial_light: bool):
@@ -299,7 +300,8 @@ class Grid:
 
     @ti.func
     def _build_body(self):
-        """Counting sort of spheres into cells: count, scan, scatter, sort each cell by id.
+        """Counting sort of spheres into cells: count, scan, scatter, sort each cell by id,
+        then copy the positions into that order (xs) and record each sphere's slot.
 
         Also resets ``state.moved`` (distance moved since this build) to 0.
         """

@@ -187,6 +187,7 @@ class Motion:
                             else:
                                 x[a] = hi_c
                                 v[a] = ti.min(v[a], 0)
+                            moved += -d
                             ti.atomic_add(self.params.count[WALL_RESTS], 1)
                             break
             self.state.moved[i] += moved

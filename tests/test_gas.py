@@ -168,7 +168,9 @@ def test_parallel_colour_launches_give_the_serial_bits(arch, monkeypatch):
     always does. Forced onto the parallel launches, an inelastic walled gas under
     gravity gives the same bits: within a colour no two threads touch one sphere. So
     does a run whose re-detections visit the touched spheres in list order instead of
-    cell order (contacts.DENSE_TOUCHED: the list is used when few were touched)."""
+    cell order when few were touched (contacts.DENSE_TOUCHED = 64: more than 46 of the
+    3,000 touched in cell order, fewer in list order: a step's first sweeps touch more,
+    its last ones fewer)."""
     from taichi_spheres import contacts
     scene = gas(3000, packing=0.3, periodic=(True, True, False), gravity=(0, 0, -9.81),
                 restitution=0.8, wall_restitution=0.9, seed=4)
@@ -179,7 +181,7 @@ def test_parallel_colour_launches_give_the_serial_bits(arch, monkeypatch):
             monkeypatch.setattr(contacts, "SERIAL_RESOLVE_PAIRS", -1)
         elif force == "list order":
             monkeypatch.undo()
-            monkeypatch.setattr(contacts, "DENSE_TOUCHED", 1)
+            monkeypatch.setattr(contacts, "DENSE_TOUCHED", 64)
         sim = ts.Simulation(scene, arch=arch)
         launches = []
         per_colour = sim._contacts.resolve_colour_parallel

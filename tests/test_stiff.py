@@ -125,14 +125,29 @@ def test_poured_pile_comes_to_rest(arch):
     assert kinetic[-1] < 1e-3 * max(kinetic)
 
 
-def test_fused_step_matches_step_kernel_by_kernel(arch):
-    """Small CPU systems can run a fused step (fused.py, one or two kernels per step,
-    projection included): a forming pile (sweep-limit steps, projections, wall
-    placements) gives the same bits and the same counters as the step launched kernel
-    by kernel."""
-    stats = _fused_matches_kernel_by_kernel(arch, _pour(120), lambda sim: 0.6)
+def test_fused_step_and_projection_near_sets_match_kernel_by_kernel(arch, monkeypatch):
+    """A forming pile (sweep-limit steps, projections, wall placements) gives the same
+    bits and the same counters (pushed pairs, largest overlap) in three builds: the
+    step launched kernel by kernel; the same with the projection scanning every sphere
+    in every iteration instead of only those near the spheres involved before
+    (projection.NEAR_SETS); and, on the CPU, the fused step (fused.py, one or two
+    kernels per step, projection included)."""
+    runs = {}
+    for name in ("kernels", "full scans", "fused"):
+        if name == "fused" and arch != "cpu":
+            continue        # the fused step is for the CPU
+        monkeypatch.setattr(projection, "NEAR_SETS", name != "full scans")
+        sim = ts.Simulation(_pour(120), arch=arch, fused=name == "fused")
+        assert sim.fused == (name == "fused")
+        assert sim._projection.near_sets == (name != "full scans")
+        sim.advance(0.6)
+        runs[name] = (sim.state(), sim.stats)
+    a, stats = runs["kernels"]
     assert stats["projected_steps"] > 0 and stats["sweep_limit_hits"] > 0
-    assert stats["projected_pairs"] > 0     # so later (near-set) iterations ran too
+    assert stats["projected_pairs"] > stats["projected_steps"]   # later iterations ran
+    for b, stats_b in runs.values():
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
+        assert stats_b == stats
 
 
 def _fused_matches_kernel_by_kernel(arch, scene, duration, **options):
@@ -150,25 +165,6 @@ def _fused_matches_kernel_by_kernel(arch, scene, duration, **options):
     assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
     assert stats_a == stats_b
     return stats_a
-
-
-def test_projection_near_sets_match_full_scans(arch, monkeypatch):
-    """The projection's later iterations examine only the spheres near those involved
-    before (projection.py): a forming pile under projections gives the same bits, the
-    same pushed-pair counts and the same largest overlap as a full scan every
-    iteration. (The fused step runs the same functions: the fused test above checks
-    it against this path.)"""
-    runs = []
-    for near in (True, False):
-        monkeypatch.setattr(projection, "NEAR_SETS", near)
-        sim = ts.Simulation(_pour(120), arch=arch, fused=False)
-        assert sim._projection.near_sets == near
-        sim.advance(0.6)
-        runs.append((sim.state(), sim.stats))
-    (a, stats_a), (b, stats_b) = runs
-    assert stats_a["projected_steps"] > 0 and stats_a["projected_pairs"] > stats_a["projected_steps"]
-    assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
-    assert stats_a == stats_b
 
 
 @pytest.mark.slow

@@ -2,12 +2,15 @@
 """Paired A/B timing of a tuning constant of the engine, in one process.
 
 Builds two Simulations of the same elastic gas (tools/bench.py's scene: packing 0.3,
-periodic cube), the second with module constants patched while its kernels compile
-(they read them through ``ti.static``), then times their steps alternately, A then B
-then B then A, ..., so that the drift of a shared machine's speed (+-25 % from minute
-to minute here) hits both alike. Reports the median of the per-pair ratios B/A with
-its quartiles, and checks that both runs made the same collisions (the constants
-tried here change speed, not physics).
+periodic cube), the second with module constants patched while it is built, compiles
+and steps (the patches are active around every step of B, so constants read at
+construction, at compile time through ``ti.static`` or in Python per step all take
+the new value; a constant another module imported by name is not reached), then
+times their steps alternately, A then B then B then A, ..., so that the drift of a
+shared machine's speed (+-25 % from minute to minute here) hits both alike. Reports
+the median of the per-pair ratios B/A with its quartiles (quartiles on both sides of
+1 mean the difference is within the noise), and whether both runs made the same
+collisions (tuning constants change speed, not physics).
 
     python tools/ab_step.py --n 100000 contacts.DENSE_TOUCHED=1
     python tools/ab_step.py --n 100000 --shuffle contacts.DENSE_TOUCHED=1
@@ -55,11 +58,20 @@ def main():
             ap.error(f"{name}: not a constant of a taichi_spheres module (e.g. contacts.DENSE_TOUCHED)")
         if not value:
             ap.error(f"{name}: give a value, as {name}=VALUE")
-        kind = type(getattr(module, attr))
+        default = getattr(module, attr)
+        kind = type(default)
         try:
-            patches.append(mock.patch.object(module, attr, kind(value)))
+            if kind is bool:
+                if value not in ("True", "False"):
+                    raise ValueError
+                new = value == "True"
+            else:
+                new = kind(value)
         except ValueError:
             ap.error(f"{name}: {value!r} is not a {kind.__name__}")
+        if kind in (int, float) and default > 0 and new <= 0:
+            ap.error(f"{name}: must stay positive (default {default})")
+        patches.append(mock.patch.object(module, attr, new))
 
     runtime.ensure("cpu", args.precision)
     scene = gas(args.n)
@@ -67,14 +79,20 @@ def main():
         p = np.random.default_rng(1).permutation(args.n)
         scene = ts.Scene.from_arrays(scene.x[p], scene.v[p], scene.radius[p],
                                      box=(scene.box_lo, scene.box_hi), periodic=scene.periodic)
-    sims = [ts.Simulation(scene, precision=args.precision) for _ in range(2)]
-    for k, sim in enumerate(sims):
+    def patched(k, fn):
+        """fn() with run k's constants in place (run 1 = B)."""
         for p in patches if k else []:
             p.start()
-        for _ in range(5):      # compiles with the constants of its run
-            sim.step(sim.max_step())
-        for p in reversed(patches) if k else []:
-            p.stop()
+        try:
+            return fn()
+        finally:
+            for p in reversed(patches) if k else []:
+                p.stop()
+
+    sims = [patched(k, lambda: ts.Simulation(scene, precision=args.precision)) for k in range(2)]
+    for k, sim in enumerate(sims):
+        for _ in range(5):      # compiles (most of) its kernels
+            patched(k, lambda: sim.step(sim.max_step()))
     times = [[], []]
     for rep in range(args.steps):
         for k in (rep % 2, 1 - rep % 2):
@@ -82,7 +100,7 @@ def main():
             h = sim.max_step()
             ti.sync()
             t0 = time.perf_counter()
-            sim.step(h)
+            patched(k, lambda: sim.step(h))
             ti.sync()
             times[k].append(time.perf_counter() - t0)
     a, b = (np.array(t) * 1e3 for t in times)
