@@ -59,10 +59,10 @@ COLLAPSE_HITS = 4
 MAX_BLOCK_COLLISIONS = 64
 
 #: A re-detection visits the touched spheres in cell order (reading every sphere's
-#: flag) when more than 1 in this many spheres were touched, else in list order;
-#: systems of fewer spheres always use cell order (the list branch is not compiled)
-#: (cell order pays off even for a few hundred touched spheres at N = 1e5 on the
-#: 2-core CPU; compare values with ``python tools/ab_step.py contacts.DENSE_TOUCHED=K``).
+#: flag) when more than 1 in this many spheres were touched, else in list order (so
+#: systems of fewer spheres always use cell order; cell order pays off even for a few
+#: hundred touched spheres at N = 1e5 on the 2-core CPU; compare values with
+#: ``python tools/ab_step.py contacts.DENSE_TOUCHED=K``).
 DENSE_TOUCHED = 4096
 
 
@@ -181,16 +181,11 @@ class Contacts:
     def separation(self, i, j):
         """d = x_i - x_j (minimum image on periodic axes) [m] and sigma = r_i + r_j [m].
         Velocities are loaded separately, only for overlapping pairs."""
-        return self.separation_from(self.state.x[i], i, j)
-
-    @ti.func
-    def separation_from(self, xi, i, j):
-        """separation(i, j) with x_i already loaded (hot loops load it once per sphere)."""
-        return self.separation_between(xi, self.state.x[j], i, j)
+        return self.separation_between(self.state.x[i], self.state.x[j], i, j)
 
     @ti.func
     def separation_between(self, xi, xj, i, j):
-        """separation(i, j) with both positions loaded (scans read x_j from grid.xs)."""
+        """separation(i, j) with both positions loaded (scans read them from grid.xs)."""
         d = xi - xj
         for a in ti.static(range(3)):
             if ti.static(not self.f.wall_axes[a]):
@@ -487,9 +482,7 @@ class Contacts:
         and cache lines, which in list order (random in space) cost a cache miss per
         row; with few, the list is cheaper than reading every flag."""
         n_t = self.n_touched[None]
-        # below DENSE_TOUCHED spheres always in cell order: the list branch is not
-        # compiled at all (compile time of the fused step)
-        dense = ti.static(self.n < DENSE_TOUCHED) or n_t > ti.static(self.n // DENSE_TOUCHED)
+        dense = n_t > ti.static(self.n // DENSE_TOUCHED)   # (no i32 overflow)
         if dense:
             n_t = self.n
         # one loop for both orders: a parallel loop costs its launch even when empty
@@ -497,10 +490,7 @@ class Contacts:
         for t in range(n_t):
             i = -1
             p = t
-            if ti.static(self.n < DENSE_TOUCHED):
-                if self.marked[t] != 0:
-                    i = self.grid.order[t]
-            elif dense:
+            if dense:
                 if self.marked[t] != 0:
                     i = self.grid.order[t]
             else:
@@ -661,11 +651,12 @@ class Contacts:
         grid.xs, detect new approaching overlaps around them, and clear their marks."""
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
         for t in range(self.n_touched[None]):
-            self.motion.walls_and_wrap(self.touched[t])
+            i = self.touched[t]
+            self.motion.walls_and_wrap(i)
             # a wall bounce moves the sphere too: fold it into the grid's move bound
-            ti.atomic_max(self.params.vals[MOVED], self.state.moved[self.touched[t]])
-            self.grid.refresh(self.touched[t])
-            self.earliest[self.touched[t]] = -1
+            ti.atomic_max(self.params.vals[MOVED], self.state.moved[i])
+            self.grid.refresh(i)
+            self.earliest[i] = -1
         self.params.reset_detection()
         self.clear_active(ti.static(self.serial_light or serial))
         self.detect_around_touched(serial)

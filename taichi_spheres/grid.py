@@ -335,11 +335,10 @@ class Grid:
                     self.order[q + 1] = self.order[q]
                     q -= 1
                 self.order[q + 1] = key
-        ti.loop_config(serialize=ti.static(self.serial_light))
-        for p in range(self.n):
-            i = self.order[p]
-            self.slot[i] = p
-            self.xs[p] = self.state.x[i]
+            for p in range(lo, hi):
+                i = self.order[p]
+                self.slot[i] = p
+                self.xs[p] = self.state.x[i]
 
     @ti.func
     def refresh(self, i):

@@ -179,11 +179,11 @@ class Projection:
         for k in range(ti.static(len(ALL_ROWS))):
             a0, b0, a1, b1 = self.grid.row_ranges(ci, self.contacts.all_rows[k])
             for q in range(a0, b0):
-                dx, rel = self.pair_push(xi, i, self.grid.order[q], wi_num, tol)
+                dx, rel = self.pair_push(xi, i, q, wi_num, tol)
                 acc += dx
                 worst = ti.max(worst, rel)
             for q in range(a1, b1):
-                dx, rel = self.pair_push(xi, i, self.grid.order[q], wi_num, tol)
+                dx, rel = self.pair_push(xi, i, q, wi_num, tol)
                 acc += dx
                 worst = ti.max(worst, rel)
         self.push[i] = acc
@@ -193,14 +193,16 @@ class Projection:
             self.involved[ti.atomic_add(self.n_involved[None], 1)] = i
 
     @ti.func
-    def pair_push(self, xi, i, j, wi_num, tol):
-        """(displacement of sphere i [m] from its overlap with j, zero below tolerance:
-        RELAXATION x overlap along the line of centres, times i's inverse-mass weight;
-        relative overlap 1 - |d|/sigma, 0 if they do not overlap)."""
+    def pair_push(self, xi, i, q, wi_num, tol):
+        """(displacement of sphere i [m] from its overlap with j = grid.order[q], zero
+        below tolerance: RELAXATION x overlap along the line of centres, times i's
+        inverse-mass weight; relative overlap 1 - |d|/sigma, 0 if they do not overlap).
+        x_j comes from grid.xs: every iteration examines right after a grid build."""
         out = ti.Vector.zero(self.real, 3)
         rel = ti.cast(0, self.real)
+        j = self.grid.order[q]
         if j != i:
-            d, sigma = self.contacts.separation_from(xi, i, j)
+            d, sigma = self.contacts.separation_between(xi, self.grid.xs[q], i, j)
             dd = d.norm_sqr()
             if dd < sigma * sigma:
                 dist = ti.sqrt(dd)
