@@ -23,6 +23,12 @@ EXIT_INTERRUPTED = 130
 DEFAULT_DURATION = 5.0
 DEFAULT_FPS = 30.0
 DEFAULT_SIZE = (640, 480)
+#: --compile auto: "fast" below this many spheres, else "optimized" (runtime.COMPILE_MODES;
+#: taichi is imported only when a run starts).
+#: Fast compiling saves ~10 s once and costs ~8 % per step (tools/compile_options.py), so
+#: it wins unless a run lasts minutes of stepping: ~600 steps of a million spheres, the
+#: length of a 5 s default run of the bench's gas, on 2 cores.
+AUTO_FAST_BELOW = 500_000
 
 
 def _size(text):
@@ -80,6 +86,11 @@ def build_parser():
     run.add_argument("--fused", action="store_true",
                      help="run each step as one fused kernel (CPU, below 3,000 spheres): "
                           "faster steps after a one-off compile of 10-60 s; same results")
+    run.add_argument("--compile", default="auto", choices=["auto", "fast", "optimized"],
+                     help="how Taichi compiles the kernels: fast (~3x shorter compile, steps "
+                          "~8%% slower, same results) or optimized; auto: "
+                          f"TAICHI_SPHERES_COMPILE if set, else fast below {AUTO_FAST_BELOW:,} "
+                          "spheres")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     info = sub.add_parser("info", help="validate a scene and show what it compiles in")
     info.add_argument("scene")
@@ -97,6 +108,16 @@ def main(argv=None):
     if args.command == "info":
         return cmd_info(scene, args)
     return cmd_run(scene, args)
+
+
+def compile_mode(choice: str, n: int) -> str:
+    """The runtime compile mode for --compile ``choice`` and a scene of n spheres."""
+    from . import runtime
+    if choice != "auto":
+        return choice
+    if os.environ.get(runtime.COMPILE_ENV, "").strip():
+        return runtime.compile_mode_from_env()
+    return "fast" if n < AUTO_FAST_BELOW else "optimized"
 
 
 def _settings(scene: Scene):
@@ -197,8 +218,11 @@ def cmd_run(scene: Scene, args):
         for path in [csv_path] + ([] if args.no_video else [video_path]) + \
                 ([npz_path] if args.npz else []):
             check_writable(path)
+        precision = args.precision or physics.get("precision")
+        from . import runtime
+        runtime.ensure(args.arch, precision, compile=compile_mode(args.compile, scene.n))
         sim = Simulation(scene, arch=args.arch,
-                         precision=args.precision or physics.get("precision"),
+                         precision=precision,
                          step_fraction=physics.get("step_fraction", DEFAULT_STEP_FRACTION),
                          max_sweeps=physics.get("max_sweeps", DEFAULT_MAX_SWEEPS),
                          fused=args.fused)
@@ -231,7 +255,8 @@ def cmd_run(scene: Scene, args):
     frames = int(math.floor(duration * fps + 1e-9)) + 1
     rt = sim.runtime
     print(f"taichi-spheres: {scene.name}, {scene.n} spheres, {duration:g} s at {fps:g} fps "
-          f"({frames} frames); arch {rt.arch} (Taichi {rt.actual}), {sim.precision}; "
+          f"({frames} frames); arch {rt.arch} (Taichi {rt.actual}), {sim.precision}, "
+          f"{rt.compile} compile; "
           f"renderer: {'none (--no-video)' if renderer is None else 'GGUI offscreen'}",
           file=sys.stderr)
     progress = Progress(frames, duration, args.quiet)

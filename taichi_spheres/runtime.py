@@ -8,11 +8,22 @@ frees every field, so older Simulations are marked stale and refuse to run
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import taichi as ti
 
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
 PRECISIONS = ("f32", "f64")
+
+#: How Taichi compiles kernels (extra ``ti.init`` options). "optimized" (the default):
+#: Taichi's own IR optimisations, then LLVM's. "fast": Taichi's "advanced" IR passes
+#: (CFG store forwarding, whole-kernel CSE ...) left to LLVM: kernels compile about 3x
+#: faster (first run of a two-sphere scene on 2 cores 17.2 -> 5.8 s, of a 1e5-sphere
+#: gas 16.1 -> 7.5 s), to the same bits, and steps run 1.08x slower at N = 1e5
+#: (``python tools/compile_options.py``, CPU; GPUs not measured). Chosen per process
+#: when Taichi is initialised: ``ensure(compile=...)``, else TAICHI_SPHERES_COMPILE.
+COMPILE_MODES = {"optimized": {}, "fast": {"advanced_optimization": False}}
+COMPILE_ENV = "TAICHI_SPHERES_COMPILE"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -22,6 +33,7 @@ class Runtime:
     precision: str     # f32|f64 (Taichi's default_fp)
     threads: int | None
     generation: int
+    compile: str = "optimized"   # COMPILE_MODES key
 
     @property
     def is_cpu(self) -> bool:
@@ -42,9 +54,23 @@ def default_precision(arch: str) -> str:
     return "f32" if arch in ("vulkan", "metal") else "f64"
 
 
-def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None = None) -> Runtime:
-    """Initialise Taichi for (arch, precision, threads) unless it already is; return it."""
+def compile_mode_from_env() -> str:
+    """The compile mode TAICHI_SPHERES_COMPILE asks for ("optimized" when unset)."""
+    mode = os.environ.get(COMPILE_ENV, "").strip() or "optimized"
+    if mode not in COMPILE_MODES:
+        raise ValueError(f"{COMPILE_ENV} must be one of {', '.join(COMPILE_MODES)}, got {mode!r}")
+    return mode
+
+
+def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None = None,
+           compile: str | None = None) -> Runtime:
+    """Initialise Taichi for (arch, precision, threads, compile mode) unless it already
+    is; return it. threads None: whatever the current runtime has (Taichi's default for
+    a new one); compile None: the current runtime's mode (for the first one,
+    TAICHI_SPHERES_COMPILE's, else "optimized")."""
     global _current, _generation
+    if compile is not None and compile not in COMPILE_MODES:
+        raise ValueError(f"compile must be one of {', '.join(COMPILE_MODES)}, got {compile!r}")
     if arch not in ARCHS:
         raise ValueError(f"arch must be one of {', '.join(ARCHS)}, got {arch!r}")
     if precision is not None and precision not in PRECISIONS:
@@ -54,13 +80,16 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
     want = precision or default_precision(arch)
     cur = _current
     if cur is not None and _alive(cur) and cur.arch == arch and cur.precision == want \
-            and (threads is None or cur.threads == threads):
+            and (threads is None or cur.threads == threads) \
+            and (compile is None or cur.compile == compile):
         return cur
+    mode = compile or (cur.compile if cur is not None else compile_mode_from_env())
     if arch == "metal" and want == "f64":
         raise ValueError("precision f64 is not available on Metal; use precision='f32'")
     fp = ti.f64 if want == "f64" else ti.f32
     kwargs = dict(arch=_taichi_arch(arch), default_fp=fp, default_ip=ti.i32,
                   offline_cache=True, log_level=ti.WARN, random_seed=0)
+    kwargs.update(COMPILE_MODES[mode])
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
     ti.init(**kwargs)
@@ -72,7 +101,7 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
                            f"(Taichi fell back to the CPU); use arch='cpu'")
     _generation += 1
     _current = Runtime(arch=arch, actual=actual, precision=want, threads=threads,
-                       generation=_generation)
+                       generation=_generation, compile=mode)
     return _current
 
 

@@ -1,9 +1,13 @@
 """Test configuration: the arch comes from a fixture, never from import-time ti.init.
 
-``--arch`` picks the backend (default cpu); ``--slow`` enables long validation runs.
+``--arch`` picks the backend (default cpu); ``--slow`` enables long validation runs;
+``--compile`` how Taichi compiles (default fast: same bits, ~3x shorter compiles, which
+are most of the suite's time; see taichi_spheres/runtime.py COMPILE_MODES).
 Tolerances depend on precision: ``tol`` scales a relative tolerance by the machine
 epsilon of the precision under test.
 """
+import os
+
 import numpy as np
 import pytest
 
@@ -11,6 +15,13 @@ import pytest
 def pytest_addoption(parser):
     parser.addoption("--arch", default="cpu", help="Taichi arch for the tests (cpu|cuda|vulkan|metal|gpu)")
     parser.addoption("--slow", action="store_true", default=False, help="run slow validation tests")
+    parser.addoption("--compile", default="fast", choices=["fast", "optimized"],
+                     help="Taichi compile mode for the tests (taichi_spheres.runtime.COMPILE_MODES)")
+
+
+def pytest_configure(config):
+    # before any test initialises Taichi (every xdist worker runs this too)
+    os.environ["TAICHI_SPHERES_COMPILE"] = config.getoption("--compile")
 
 
 def pytest_collection_modifyitems(config, items):

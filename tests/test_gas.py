@@ -147,6 +147,47 @@ def test_stale_simulation_refuses_to_run(arch):
         sim.advance(0.1)
 
 
+def test_compile_modes_give_the_same_bits(arch):
+    """runtime.COMPILE_MODES change how long kernels take to compile and run, never the
+    results: an inelastic walled gas under gravity (most features compiled in) ends in
+    the same bits in both modes."""
+    from taichi_spheres import runtime
+    if arch == "metal":
+        pytest.skip("no f64 on Metal")
+    scene = gas(300, packing=0.2, periodic=(True, True, False), gravity=(0, 0, -1.0),
+                restitution=0.8, seed=5, polydispersity=0.3)
+    out = {}
+    try:
+        for mode in ("fast", "optimized"):
+            runtime.ensure(arch, "f64", compile=mode)
+            sim = ts.Simulation(scene, arch=arch)
+            assert sim.runtime.compile == mode
+            sim.advance(1.0)
+            assert sim.stats["pair_collisions"] > 300
+            out[mode] = sim.state()
+    finally:
+        runtime.ensure(arch, "f64", compile=runtime.compile_mode_from_env())
+    np.testing.assert_array_equal(out["fast"].x, out["optimized"].x)
+    np.testing.assert_array_equal(out["fast"].v, out["optimized"].v)
+
+
+def test_compile_mode_choices(monkeypatch):
+    from taichi_spheres import runtime
+    from taichi_spheres.cli import AUTO_FAST_BELOW, compile_mode
+    monkeypatch.setenv(runtime.COMPILE_ENV, "quick")
+    with pytest.raises(ValueError, match=runtime.COMPILE_ENV):
+        runtime.compile_mode_from_env()
+    with pytest.raises(ValueError, match="compile"):
+        runtime.ensure("cpu", compile="quick")
+    assert compile_mode("optimized", 10) == "optimized"
+    monkeypatch.setenv(runtime.COMPILE_ENV, "optimized")
+    assert compile_mode("auto", 10) == "optimized"
+    monkeypatch.delenv(runtime.COMPILE_ENV)
+    assert runtime.compile_mode_from_env() == "optimized"
+    assert compile_mode("auto", AUTO_FAST_BELOW - 1) == "fast"
+    assert compile_mode("auto", AUTO_FAST_BELOW) == "optimized"
+
+
 def test_bad_simulation_arguments(arch):
     scene = gas(10, packing=0.05, periodic=True)
     with pytest.raises(ValueError, match="arch"):
