@@ -25,9 +25,10 @@ DEFAULT_FPS = 30.0
 DEFAULT_SIZE = (640, 480)
 #: --compile auto: "fast" below this many spheres, else "optimized" (runtime.COMPILE_MODES;
 #: taichi is imported only when a run starts).
-#: Fast compiling saves ~10 s once and costs ~8 % per step (tools/compile_options.py), so
-#: it wins unless a run lasts minutes of stepping: ~600 steps of a million spheres, the
-#: length of a 5 s default run of the bench's gas, on 2 cores.
+#: Fast compiling saves ~10 s once and costs ~8 % per step (tools/compile_options.py:
+#: CPU, one thread, N = 1e5; extrapolated here to 1e6 and 2 threads), so it wins unless
+#: a run lasts minutes of stepping: ~600 steps of a million spheres, the length of a
+#: 5 s default run of the bench's gas, on 2 cores. GPUs get the same choice, unmeasured.
 AUTO_FAST_BELOW = 500_000
 
 

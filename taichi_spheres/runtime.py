@@ -1,7 +1,7 @@
 """Taichi runtime management: ``ti.init`` happens here, on demand, never at import.
 
-Taichi has one runtime per process. Simulations with the same arch, precision and
-thread count share it; asking for a different one re-initialises Taichi, which
+Taichi has one runtime per process. Simulations with the same arch, precision,
+thread count and compile mode share it; asking for a different one re-initialises Taichi, which
 frees every field, so older Simulations are marked stale and refuse to run
 (``RuntimeError``) instead of crashing inside a kernel.
 """
@@ -19,8 +19,8 @@ PRECISIONS = ("f32", "f64")
 #: Taichi's own IR optimisations, then LLVM's. "fast": Taichi's "advanced" IR passes
 #: (CFG store forwarding, whole-kernel CSE ...) left to LLVM: kernels compile about 3x
 #: faster (first run of a two-sphere scene on 2 cores 17.2 -> 5.8 s, of a 1e5-sphere
-#: gas 16.1 -> 7.5 s), to the same bits, and steps run 1.08x slower at N = 1e5
-#: (``python tools/compile_options.py``, CPU; GPUs not measured). Chosen per process
+#: gas 16.1 -> 7.5 s), to the same bits (tested in f64), and steps run 1.08x slower at
+#: N = 1e5 on one thread (``python tools/compile_options.py``, CPU; GPUs not measured). Chosen per process
 #: when Taichi is initialised: ``ensure(compile=...)``, else TAICHI_SPHERES_COMPILE.
 COMPILE_MODES = {"optimized": {}, "fast": {"advanced_optimization": False}}
 COMPILE_ENV = "TAICHI_SPHERES_COMPILE"
@@ -56,7 +56,7 @@ def default_precision(arch: str) -> str:
 
 def compile_mode_from_env() -> str:
     """The compile mode TAICHI_SPHERES_COMPILE asks for ("optimized" when unset)."""
-    mode = os.environ.get(COMPILE_ENV, "").strip() or "optimized"
+    mode = os.environ.get(COMPILE_ENV, "").strip().lower() or "optimized"
     if mode not in COMPILE_MODES:
         raise ValueError(f"{COMPILE_ENV} must be one of {', '.join(COMPILE_MODES)}, got {mode!r}")
     return mode
@@ -65,9 +65,11 @@ def compile_mode_from_env() -> str:
 def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None = None,
            compile: str | None = None) -> Runtime:
     """Initialise Taichi for (arch, precision, threads, compile mode) unless it already
-    is; return it. threads None: whatever the current runtime has (Taichi's default for
-    a new one); compile None: the current runtime's mode (for the first one,
-    TAICHI_SPHERES_COMPILE's, else "optimized")."""
+    is; return it. threads None: any thread count if the current runtime fits, else
+    Taichi's default; compile None: the current runtime's mode, also when Taichi is
+    re-initialised for another arch or precision (for the first runtime,
+    TAICHI_SPHERES_COMPILE's, else "optimized"). A re-initialisation makes earlier
+    Simulations stale (see check)."""
     global _current, _generation
     if compile is not None and compile not in COMPILE_MODES:
         raise ValueError(f"compile must be one of {', '.join(COMPILE_MODES)}, got {compile!r}")
@@ -116,5 +118,6 @@ def check(rt: Runtime) -> None:
     if _current is None or _current.generation != rt.generation or not _alive(rt):
         raise RuntimeError(
             "Taichi was re-initialised (another Simulation with a different arch, precision "
-            "or thread count, or a ti.init/ti.reset call) after this Simulation was built; "
+            "or thread count, an ensure() with another compile mode, or a ti.init/ti.reset "
+            "call) after this Simulation was built; "
             "its fields are gone. Build the Simulation again.")

@@ -15,13 +15,18 @@ import pytest
 def pytest_addoption(parser):
     parser.addoption("--arch", default="cpu", help="Taichi arch for the tests (cpu|cuda|vulkan|metal|gpu)")
     parser.addoption("--slow", action="store_true", default=False, help="run slow validation tests")
-    parser.addoption("--compile", default="fast", choices=["fast", "optimized"],
-                     help="Taichi compile mode for the tests (taichi_spheres.runtime.COMPILE_MODES)")
+    parser.addoption("--compile", default=None, choices=["fast", "optimized"],
+                     help="Taichi compile mode for the tests (taichi_spheres.runtime."
+                          "COMPILE_MODES; default: TAICHI_SPHERES_COMPILE if set, else fast)")
 
 
 def pytest_configure(config):
     # before any test initialises Taichi (every xdist worker runs this too)
-    os.environ["TAICHI_SPHERES_COMPILE"] = config.getoption("--compile")
+    mode = config.getoption("--compile")
+    if mode:
+        os.environ["TAICHI_SPHERES_COMPILE"] = mode
+    else:
+        os.environ.setdefault("TAICHI_SPHERES_COMPILE", "fast")
 
 
 def pytest_collection_modifyitems(config, items):

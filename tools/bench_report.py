@@ -66,7 +66,8 @@ def header(args, runtime, loads) -> list:
     return [
         "# Benchmark: elastic hard-sphere gas, N = " + _sizes(args.sizes), "",
         f"Generated {datetime.date.today().isoformat()} by `{cmd}` on {hardware}, arch "
-        f"{runtime.arch} (Taichi {'.'.join(map(str, ti.__version__))}, {runtime.actual}), "
+        f"{runtime.arch} (Taichi {'.'.join(map(str, ti.__version__))}, {runtime.actual}, "
+        f"{runtime.compile} compile mode), "
         f"Python {platform.python_version()}. Load average (1 min, all processes on the "
         f"machine) {loads[0]:.1f} at the start and {loads[1]:.1f} at the end of the run.", "",
         "Scene: N spheres of radius 0.5 m on a jittered lattice in a periodic cube at packing "

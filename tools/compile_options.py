@@ -17,7 +17,7 @@ Steps: this shared VM's speed drifts by +-25 % from minute to minute, more than 
 difference measured, so the modes step *side by side*: two processes at the same
 time, one pinned to each core with one thread, for ``--window`` seconds, swapping
 cores every round. Reported: the median over rounds of the per-round ratio of median
-ms/step (fast / optimized), for the gas and for the fused 1,000 spheres. (Single
+ms/step (fast / optimized), with its range, for the gas and for the fused 1,000 spheres. (Single
 thread: the modes' code differs, not their threading.)
 
     python tools/compile_options.py                      # ~12 min on 2 cores
@@ -146,7 +146,8 @@ def main():
         return
     if args.rounds < 1 or args.n < 8 or args.window <= 0 or args.delay <= 0:
         ap.error("--rounds >= 1, --n >= 8, --window > 0 and --delay > 0 please")
-    if len(os.sched_getaffinity(0)) < 2:
+    allowed = sorted(os.sched_getaffinity(0))
+    if len(allowed) < 2:
         ap.error("the side-by-side runs need 2 cores")
     common = ["--n", str(args.n), "--window", str(args.window)]
     compiled = {m: [] for m in MODES}
@@ -161,13 +162,19 @@ def main():
                 f"{k} {v:.2f} s" if isinstance(v, float) else f"{k} {v}"
                 for k, v in res.items()), flush=True)
         go = time.time() + args.delay
-        cores = (0, 1) if r % 2 == 0 else (1, 0)
+        cores = allowed[:2] if r % 2 == 0 else allowed[1::-1]
         side = {}
         with tempfile.TemporaryDirectory() as c0, tempfile.TemporaryDirectory() as c1:
             procs = {mode: _spawn(["--child", "steps", mode, str(core), str(go)] + common, cache)
                      for mode, core, cache in zip(MODES, cores, (c0, c1))}
-            for mode, proc in procs.items():
-                side[mode] = _result(proc, f"side-by-side run ({mode})")
+            try:
+                for mode, proc in procs.items():
+                    side[mode] = _result(proc, f"side-by-side run ({mode})")
+            finally:
+                for proc in procs.values():
+                    if proc.poll() is None:
+                        proc.kill()
+                        proc.wait()
         for key in ratios:
             ratios[key].append(side["fast"][key] / side["optimized"][key])
         print(f"round {r + 1} steps side by side (ms/step, one thread): " + "; ".join(
@@ -181,14 +188,14 @@ def main():
     print(f"\nCompile modes, CPU, f64; {args.rounds} round(s); gas N = {args.n:,}, fused "
           "N = 1,000. Compile: seconds to build and first run, empty kernel cache, median "
           "of rounds. Steps: fast / optimized median ms/step, side by side on one core "
-          "each, median of rounds (quartiles when >= 4 rounds).")
+          "each, median of rounds (range over rounds).")
     print("| mode | compile small s | compile gas s | compile fused s | gas step time "
           "vs optimized | fused step time vs optimized | same bits |")
     print("|:---|---:|---:|---:|---:|---:|:---:|")
 
     def spread(vals):
-        q = statistics.quantiles(vals, n=4) if len(vals) >= 4 else None
-        return f"{statistics.median(vals):.3f}" + (f" ({q[0]:.3f}–{q[2]:.3f})" if q else "")
+        rng = f" ({min(vals):.3f}–{max(vals):.3f})" if len(vals) > 1 else ""
+        return f"{statistics.median(vals):.3f}" + rng
     for mode in MODES:
         step = ("1" if mode == "optimized" else spread(ratios["gas"]),
                 "1" if mode == "optimized" else spread(ratios["fused"]))
