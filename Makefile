@@ -7,9 +7,10 @@ ARCH ?= cpu
 # pytest-xdist workers: most of a cold test run is Taichi compiling each test's kernels,
 # one kernel at a time, so two processes halve it on 2 cores (WORKERS=0: one process)
 WORKERS ?= auto
-# how Taichi compiles the tests' kernels: fast (default, same bits, ~3x shorter compiles)
-# or optimized (the library's default; taichi_spheres/runtime.py COMPILE_MODES)
-COMPILE ?= fast
+# how Taichi compiles the tests' kernels: COMPILE=fast or optimized (unset: tests/conftest.py
+# takes TAICHI_SPHERES_COMPILE, else fast; taichi_spheres/runtime.py COMPILE_MODES)
+COMPILE ?=
+COMPILE_OPT := $(if $(COMPILE),--compile $(COMPILE))
 
 .PHONY: demo test test-slow bench venv clean
 
@@ -27,10 +28,10 @@ demo: $(STAMP)
 	$(BIN)/taichi-spheres run scenes/seed_five.toml -o out/seed_five.mp4 --arch $(ARCH)
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(WORKERS) --arch $(ARCH) --compile $(COMPILE)
+	$(BIN)/python -m pytest -q -n $(WORKERS) --arch $(ARCH) $(COMPILE_OPT)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -q -n $(WORKERS) --arch $(ARCH) --compile $(COMPILE) --slow
+	$(BIN)/python -m pytest -q -n $(WORKERS) --arch $(ARCH) $(COMPILE_OPT) --slow
 
 bench: $(STAMP)
 	$(BIN)/python tools/bench.py --arch $(ARCH)

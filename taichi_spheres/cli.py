@@ -116,9 +116,7 @@ def compile_mode(choice: str, n: int) -> str:
     from . import runtime
     if choice != "auto":
         return choice
-    if os.environ.get(runtime.COMPILE_ENV, "").strip():
-        return runtime.compile_mode_from_env()
-    return "fast" if n < AUTO_FAST_BELOW else "optimized"
+    return runtime.compile_mode_from_env("fast" if n < AUTO_FAST_BELOW else "optimized")
 
 
 def _settings(scene: Scene):

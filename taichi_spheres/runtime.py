@@ -1,9 +1,9 @@
 """Taichi runtime management: ``ti.init`` happens here, on demand, never at import.
 
 Taichi has one runtime per process. Simulations with the same arch, precision,
-thread count and compile mode share it; asking for a different one re-initialises Taichi, which
-frees every field, so older Simulations are marked stale and refuse to run
-(``RuntimeError``) instead of crashing inside a kernel.
+thread count and compile mode share it; asking for a different one re-initialises
+Taichi, which frees every field, so older Simulations are marked stale and refuse to
+run (``RuntimeError``) instead of crashing inside a kernel.
 """
 from __future__ import annotations
 
@@ -20,8 +20,9 @@ PRECISIONS = ("f32", "f64")
 #: (CFG store forwarding, whole-kernel CSE ...) left to LLVM: kernels compile about 3x
 #: faster (first run of a two-sphere scene on 2 cores 17.2 -> 5.8 s, of a 1e5-sphere
 #: gas 16.1 -> 7.5 s), to the same bits (tested in f64), and steps run 1.08x slower at
-#: N = 1e5 on one thread (``python tools/compile_options.py``, CPU; GPUs not measured). Chosen per process
-#: when Taichi is initialised: ``ensure(compile=...)``, else TAICHI_SPHERES_COMPILE.
+#: N = 1e5 on one thread (``python tools/compile_options.py``, CPU; GPUs not
+#: measured). Chosen per process when Taichi is initialised: ``ensure(compile=...)``,
+#: else TAICHI_SPHERES_COMPILE.
 COMPILE_MODES = {"optimized": {}, "fast": {"advanced_optimization": False}}
 COMPILE_ENV = "TAICHI_SPHERES_COMPILE"
 
@@ -54,9 +55,9 @@ def default_precision(arch: str) -> str:
     return "f32" if arch in ("vulkan", "metal") else "f64"
 
 
-def compile_mode_from_env() -> str:
-    """The compile mode TAICHI_SPHERES_COMPILE asks for ("optimized" when unset)."""
-    mode = os.environ.get(COMPILE_ENV, "").strip().lower() or "optimized"
+def compile_mode_from_env(default: str = "optimized") -> str:
+    """The compile mode TAICHI_SPHERES_COMPILE asks for (``default`` when unset)."""
+    mode = os.environ.get(COMPILE_ENV, "").strip().lower() or default
     if mode not in COMPILE_MODES:
         raise ValueError(f"{COMPILE_ENV} must be one of {', '.join(COMPILE_MODES)}, got {mode!r}")
     return mode

@@ -22,11 +22,12 @@ def pytest_addoption(parser):
 
 def pytest_configure(config):
     # before any test initialises Taichi (every xdist worker runs this too)
+    from taichi_spheres.runtime import COMPILE_ENV    # (imports taichi, no ti.init)
     mode = config.getoption("--compile")
     if mode:
-        os.environ["TAICHI_SPHERES_COMPILE"] = mode
+        os.environ[COMPILE_ENV] = mode
     else:
-        os.environ.setdefault("TAICHI_SPHERES_COMPILE", "fast")
+        os.environ.setdefault(COMPILE_ENV, "fast")
 
 
 def pytest_collection_modifyitems(config, items):
