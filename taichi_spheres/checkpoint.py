@@ -6,13 +6,17 @@ a digest of the scene so that it is only ever resumed on the scene that made it.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
+import signal
+import threading
 
 import numpy as np
 
-__all__ = ["scene_digest", "save", "load", "set_aside", "copy_video_prefix"]
+__all__ = ["scene_digest", "save", "load", "set_aside", "copy_video_prefix",
+           "hold_interrupts"]
 
 
 def scene_digest(scene) -> str:
@@ -26,6 +30,31 @@ def scene_digest(scene) -> str:
     return h.hexdigest()
 
 
+@contextlib.contextmanager
+def hold_interrupts():
+    """Hold Ctrl-C (SIGINT) until the block ends, then deliver it to the previous handler.
+
+    imageio-ffmpeg kills the encoder when KeyboardInterrupt lands inside a frame write
+    (it treats any BaseException there as "do not wait for ffmpeg"), which leaves an mp4
+    without its index that no player opens; a CSV row or a checkpoint cut in half is as
+    bad. Frame writes, CSV rows, checkpoints and the final close run inside this block, so
+    an interrupted run keeps every frame it wrote. Outside the main thread (where Python
+    cannot set handlers) or under a handler installed from C, the block runs unguarded.
+    """
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is None):
+        yield
+        return
+    caught = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        signal.raise_signal(signal.SIGINT)     # KeyboardInterrupt here, after the write
+
+
 def save(path, sim, scene, frame, fps) -> None:
     """Write the checkpoint atomically (temporary file, then rename)."""
     ck = sim.checkpoint()
@@ -34,8 +63,9 @@ def save(path, sim, scene, frame, fps) -> None:
                 step_fraction=ck["step_fraction"], max_sweeps=ck["max_sweeps"],
                 frame=int(frame), fps=float(fps), scene=scene_digest(scene))
     tmp = path + ".tmp.npz"
-    np.savez(tmp, x=ck["x"], v=ck["v"], meta=np.array(json.dumps(meta)))
-    os.replace(tmp, path)
+    with hold_interrupts():
+        np.savez(tmp, x=ck["x"], v=ck["v"], meta=np.array(json.dumps(meta)))
+        os.replace(tmp, path)
 
 
 def load(path, sim, scene, fps) -> int:

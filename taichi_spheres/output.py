@@ -7,6 +7,7 @@ import os
 import numpy as np
 
 from . import observe
+from .checkpoint import hold_interrupts
 
 __all__ = ["VideoWriter", "DiagnosticsWriter", "CSV_COLUMNS", "check_writable"]
 
@@ -42,13 +43,15 @@ class VideoWriter:
                                           ffmpeg_log_level="error")
 
     def write(self, rgb: np.ndarray) -> None:
-        self._writer.append_data(rgb)
-        self.frames += 1
+        with hold_interrupts():
+            self._writer.append_data(rgb)
+            self.frames += 1
 
     def close(self) -> None:
         if self._writer is not None:
-            self._writer.close()
-            self._writer = None
+            with hold_interrupts():
+                self._writer.close()
+                self._writer = None
 
     def __enter__(self):
         return self
@@ -81,9 +84,10 @@ class DiagnosticsWriter:
         row = dict(frame=frame, time=state.time, kinetic=ke, potential=pe, total=ke + pe,
                    px=p[0], py=p[1], pz=p[2])
         row.update({c: stats[c] for c in _STATS_COLUMNS})
-        self._csv.writerow([_fmt(row[c]) for c in CSV_COLUMNS])
-        self._fh.flush()
-        self.rows += 1
+        with hold_interrupts():
+            self._csv.writerow([_fmt(row[c]) for c in CSV_COLUMNS])
+            self._fh.flush()
+            self.rows += 1
         return row
 
     def close(self):
