@@ -126,7 +126,7 @@ def _settings(scene: Scene):
 
 def cmd_info(scene: Scene, args):
     from .grid import GridGeometry
-    from .simulation import DEFAULT_STEP_FRACTION, rest_speed_for
+    from .simulation import DEFAULT_STEP_FRACTION, estimate_field_bytes, rest_speed_for
     from .state import Features
     run, physics, render = _settings(scene)
     fraction = physics.get("step_fraction", DEFAULT_STEP_FRACTION)
@@ -136,13 +136,7 @@ def cmd_info(scene: Scene, args):
     precision = physics.get("precision") or ("f32" if args.arch in ("vulkan", "metal") else "f64")
     rest_speed = rest_speed_for(scene, fraction)
     features = Features.from_scene(scene, rest_speed)
-    real = 8 if precision == "f64" else 4
-    # x, v, grid.xs, projection push (4 vec3), moved, earliest, projection rmax; hits,
-    # marked, touched, order, cell_of, slot, projection involved/near/stamp (+ support)
-    per_sphere = 12 * real + 3 * real + 9 * 4 + (4 if features.supports else 0)
-    per_sphere += (0 if features.equal_radii else real) + (0 if features.equal_masses else real)
-    per_cell = 7 * 4   # start, cursor; active, first_pair (2), active_list, by_colour
-    memory = scene.n * per_sphere + geom.n_cells * per_cell
+    memory = estimate_field_bytes(scene, precision, fraction)
     print(f"scene: {scene.name} ({scene.meta.get('source', '')})")
     print(f"spheres: {scene.n}, radius {scene.radius.min():g}..{scene.radius.max():g} m, "
           f"mass {scene.mass.min():g}..{scene.mass.max():g} kg")
@@ -157,7 +151,8 @@ def cmd_info(scene: Scene, args):
     print("compiled in:")
     for line in features.describe():
         print(f"  {line}")
-    print(f"device memory: about {memory / 2**20:.2f} MiB ({per_sphere} B per sphere)")
+    print(f"device memory: about {memory / 2**20:.2f} MiB ({memory / scene.n:.0f} B per sphere, "
+          f"grid included)")
     return 0
 
 

@@ -18,6 +18,7 @@ import time as _time
 
 import numpy as np
 import taichi as ti
+from taichi.lang.util import to_numpy_type
 
 from . import runtime
 from .contacts import REST_TOLERANCE, Contacts, decode_status
@@ -34,7 +35,7 @@ from .state import Features, SphereState, State
 from .walls import Motion
 
 __all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS", "rest_speed_for",
-           "REST_SPEED_FACTOR"]
+           "REST_SPEED_FACTOR", "estimate_field_bytes"]
 
 #: Default largest move per step as a fraction of the smallest radius. Two spheres
 #: then close in by at most 0.2 r per step, so a pair can only pass through each
@@ -66,6 +67,31 @@ def rest_speed_for(scene: Scene, step_fraction: float = DEFAULT_STEP_FRACTION) -
         return float(scene.rest_speed)
     g = float(np.linalg.norm(scene.gravity))
     return REST_SPEED_FACTOR * math.sqrt(2.0 * g * step_fraction * float(scene.radius.min()))
+
+
+def estimate_field_bytes(scene: Scene, precision: str = "f64",
+                         step_fraction: float = DEFAULT_STEP_FRACTION) -> int:
+    """Device memory a Simulation of ``scene`` allocates for its Taichi fields [bytes],
+    counted per sphere and per grid cell without initialising Taichi (``cli info``).
+    tests/test_scene.py holds it to within 3 % of :meth:`Simulation.field_bytes`."""
+    geom = GridGeometry.for_box(scene.box_lo, scene.box_hi, scene.periodic,
+                                float(scene.radius.max()), float(scene.radius.min()),
+                                scene.n, step_fraction)
+    features = Features.from_scene(scene, rest_speed_for(scene, step_fraction))
+    real = 8 if precision == "f64" else 4
+    # x, v, grid.xs, projection push (4 vec3), moved, earliest, projection rmax; hits,
+    # marked, touched, order, cell_of, slot, projection involved/near/stamp (+ support)
+    per_sphere = 12 * real + 3 * real + 9 * 4 + (4 if features.supports else 0)
+    per_sphere += (0 if features.equal_radii else real) + (0 if features.equal_masses else real)
+    per_cell = 7 * 4   # start, cursor; active, first_pair (2), active_list, by_colour
+    return scene.n * per_sphere + geom.n_cells * per_cell
+
+
+def _field_nbytes(field) -> int:
+    """Bytes of one Taichi field [bytes]: elements x components x dtype size."""
+    components = field.n * field.m if isinstance(field, ti.MatrixField) else 1
+    return int(np.prod(field.shape, dtype=np.int64)) * components * \
+        np.dtype(to_numpy_type(field.dtype)).itemsize
 
 
 class Simulation:
@@ -165,6 +191,21 @@ class Simulation:
         """Relative overlap above which the projection pushes pairs apart (fixed when the
         kernels are built: projection.DEFAULT_TOLERANCE)."""
         return self._overlap_tolerance
+
+    def field_bytes(self) -> int:
+        """Bytes of the Taichi fields this Simulation allocated [bytes], from their
+        shapes and dtypes (state, parameters and their counters, motion, grid,
+        contacts, projection)."""
+        seen, total = set(), 0
+        parts = (self._state, self._params, self._params.count, self._params.vals,
+                 self._motion, self._grid, self._contacts, self._projection)
+        for part in parts:
+            for value in vars(part).values():
+                for item in value if isinstance(value, (list, tuple)) else (value,):
+                    if isinstance(item, ti.Field) and id(item) not in seen:
+                        seen.add(id(item))
+                        total += _field_nbytes(item)
+        return total
 
     @property
     def stats(self) -> dict:

@@ -48,15 +48,8 @@ def test_one_feature_compiled_in_changes_nothing_but_code(arch):
         for _ in range(4):
             sim.step(sim.max_step())
         assert np.array_equal(sim.state().x, base.state().x), key
-        extra = bench.field_bytes(sim) - bench.field_bytes(base)
+        extra = sim.field_bytes() - base.field_bytes()
         assert extra == (8 * scene.n if key == "radii" else 0), key
-
-
-def test_field_bytes_counts_the_sphere_fields(arch):
-    """Positions and velocities alone are 2 x 3 reals per sphere; the total is more."""
-    sim = Simulation(_gas(), arch=arch, precision="f32")
-    assert bench.field_bytes(sim) > 2 * 3 * 4 * sim.n
-    assert bench._field_nbytes(sim._state.x) == 3 * 4 * sim.n
 
 
 def test_rss_and_exponent():

@@ -240,3 +240,27 @@ def test_parallel_colour_launches_give_the_serial_bits(arch, monkeypatch):
                 assert stats_b[key] == pytest.approx(value, rel=1e-12)
             else:
                 assert stats_b[key] == value, key
+
+
+@pytest.mark.parametrize("kind", ["gas", "radii", "masses", "gravity"])
+def test_memory_estimate_matches_the_fields(arch, kind):
+    """``cli info``'s estimate (no Taichi) stays within 3 % of the bytes the fields of a
+    built Simulation take, for each feature that adds fields."""
+    scene = gas(2000, packing=0.3, seed=3)
+    rng = np.random.default_rng(0)
+    radius, mass, kw = scene.radius, None, {}
+    if kind == "radii":
+        radius = scene.radius * rng.uniform(0.5, 1.0, scene.n)
+    if kind == "masses":
+        mass = rng.uniform(1.0, 2.0, scene.n)
+    if kind == "gravity":
+        kw = dict(gravity=(0, 0, -9.81), restitution=0.5, periodic=(True, True, False))
+    scene = ts.Scene.from_arrays(scene.x, scene.v, radius, mass=mass,
+                                 box=(scene.box_lo, scene.box_hi),
+                                 **{"periodic": scene.periodic, **kw})
+    for precision in ("f64", "f32"):
+        sim = ts.Simulation(scene, arch=arch, precision=precision)
+        actual = sim.field_bytes()
+        assert sim.field_bytes() > 2 * 3 * (8 if precision == "f64" else 4) * scene.n
+        estimate = ts.simulation.estimate_field_bytes(scene, precision)
+        assert abs(estimate / actual - 1) < 0.03, (kind, precision, estimate, actual)

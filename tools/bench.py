@@ -29,7 +29,6 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
 import taichi as ti  # noqa: E402
-from taichi.lang.util import to_numpy_type  # noqa: E402
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres import runtime as ts_runtime  # noqa: E402
@@ -64,29 +63,6 @@ def rss_bytes() -> int | None:
         return None
 
 
-def _field_nbytes(field) -> int:
-    """Bytes of one Taichi field [bytes]: elements x components x dtype size."""
-    components = field.n * field.m if isinstance(field, ti.MatrixField) else 1
-    return int(np.prod(field.shape, dtype=np.int64)) * components * \
-        to_numpy_type(field.dtype)().itemsize
-
-
-def field_bytes(sim) -> int:
-    """Bytes of the Taichi fields a Simulation allocated [bytes], computed from their
-    shapes and dtypes (fields held by its state, parameters and their counter slots,
-    motion, grid, contacts, projection)."""
-    seen, total = set(), 0
-    parts = (sim._state, sim._params, sim._params.count, sim._params.vals, sim._motion,
-             sim._grid, sim._contacts, sim._projection)
-    for part in parts:
-        for value in vars(part).values():
-            for item in value if isinstance(value, (list, tuple)) else (value,):
-                if isinstance(item, ti.Field) and id(item) not in seen:
-                    seen.add(id(item))
-                    total += _field_nbytes(item)
-    return total
-
-
 def build(make_sim, warm_steps=3):
     """Build a Simulation with ``make_sim()`` and take ``warm_steps`` steps (compiling
     its kernels). Returns (sim, info): compile_s [s] (build + warm-up), rss_build and
@@ -104,7 +80,7 @@ def build(make_sim, warm_steps=3):
     r2 = rss_bytes()
     grow = (lambda r: None if r0 is None else r - r0)
     return sim, dict(compile_s=compile_s, rss_build=grow(r1), rss_warm=grow(r2),
-                     fields=field_bytes(sim))
+                     fields=sim.field_bytes())
 
 
 # ---- stage timing ----
@@ -305,8 +281,8 @@ def compare_features(make_off, make_on, repeats=5, steps=20) -> dict:
     n = sims["off"].n
     q1, med, q3 = np.percentile(ratios, [25, 50, 75])
     return dict(off=n / best["off"], on=n / best["on"], speedup=float(med), q1=float(q1),
-                q3=float(q3), off_bytes=field_bytes(sims["off"]) / n,
-                on_bytes=field_bytes(sims["on"]) / n,
+                q3=float(q3), off_bytes=sims["off"].field_bytes() / n,
+                on_bytes=sims["on"].field_bytes() / n,
                 same=bool(np.array_equal(sims["off"].state().x, sims["on"].state().x)))
 
 
