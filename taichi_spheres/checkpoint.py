@@ -6,17 +6,15 @@ a digest of the scene so that it is only ever resumed on the scene that made it.
 """
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import json
 import os
-import signal
-import threading
 
 import numpy as np
 
-__all__ = ["scene_digest", "save", "load", "set_aside", "copy_video_prefix",
-           "hold_interrupts"]
+from .interrupts import hold_interrupts
+
+__all__ = ["scene_digest", "save", "load", "set_aside", "copy_video_prefix"]
 
 
 def scene_digest(scene) -> str:
@@ -28,31 +26,6 @@ def scene_digest(scene) -> str:
     h.update(repr((scene.periodic, scene.restitution, scene.wall_restitution,
                    scene.restitution_model, scene.rest_speed)).encode())
     return h.hexdigest()
-
-
-@contextlib.contextmanager
-def hold_interrupts():
-    """Hold Ctrl-C (SIGINT) until the block ends, then deliver it to the previous handler.
-
-    imageio-ffmpeg kills the encoder when KeyboardInterrupt lands inside a frame write
-    (it treats any BaseException there as "do not wait for ffmpeg"), which leaves an mp4
-    without its index that no player opens; a CSV row or a checkpoint cut in half is as
-    bad. Frame writes, CSV rows, checkpoints and the final close run inside this block, so
-    an interrupted run keeps every frame it wrote. Outside the main thread (where Python
-    cannot set handlers) or under a handler installed from C, the block runs unguarded.
-    """
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is None):
-        yield
-        return
-    caught = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    if caught:
-        signal.raise_signal(signal.SIGINT)     # KeyboardInterrupt here, after the write
 
 
 def save(path, sim, scene, frame, fps) -> None:
@@ -85,10 +58,16 @@ def load(path, sim, scene, fps) -> int:
 
 
 def set_aside(video_path) -> str | None:
-    """On resume, move the earlier video out of the way; returns its new path."""
+    """On resume, move the earlier video out of the way; returns its new path. If an
+    earlier resume was interrupted while copying (its set-aside file is still there),
+    that file is the earlier video and ``video_path`` only a partial copy of it."""
+    old = video_path + ".before-resume.mp4"
+    if os.path.exists(old):
+        if os.path.exists(video_path):
+            os.remove(video_path)
+        return old
     if not os.path.exists(video_path):
         return None
-    old = video_path + ".before-resume.mp4"
     os.replace(video_path, old)
     return old
 

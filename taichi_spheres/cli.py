@@ -13,6 +13,7 @@ import time
 
 import numpy as np
 
+from .interrupts import hold_interrupts
 from .scene import Scene
 from .scenefile import load_scene
 
@@ -256,14 +257,14 @@ def cmd_run(scene: Scene, args):
     progress = Progress(frames, duration, args.quiet)
     earlier = checkpoint.set_aside(video_path) if renderer is not None and start_frame else None
     video = VideoWriter(video_path, fps) if renderer is not None else None
-    if earlier:
-        checkpoint.copy_video_prefix(earlier, video, start_frame)
     diag = DiagnosticsWriter(csv_path, scene.gravity, keep_frames=start_frame)
     snaps_x, snaps_v, snaps_t = [], [], []
     render_seconds = 0.0
     status = 0
-    frame = -1
+    frame = start_frame - 1
     try:
+        if earlier:     # (interrupted here, the next --resume starts from `earlier` again)
+            checkpoint.copy_video_prefix(earlier, video, start_frame)
         for frame in range(start_frame, frames):
             sim.advance_to(frame / fps)
             st = sim.state()
@@ -289,18 +290,25 @@ def cmd_run(scene: Scene, args):
         print(f"\nerror at frame {frame}: {exc!r}", file=sys.stderr)
         raise
     finally:
-        if video is not None:
-            video.close()
-        diag.close()
-        if args.npz and snaps_x:
-            np.savez_compressed(npz_path, x=np.stack(snaps_x), v=np.stack(snaps_v),
-                                time=np.array(snaps_t), radius=scene.radius, mass=scene.mass)
-        if renderer is not None:
-            renderer.close()
-        written = [p for p, on in ((video_path, video is not None), (csv_path, True),
-                                   (npz_path, args.npz and bool(snaps_x)),
-                                   (ckpt_path, bool(args.checkpoint_every))) if on]
-        print(f"wrote {', '.join(written)} ({diag.rows} frames)", file=sys.stderr)
+        try:
+            # held: a Ctrl-C while closing waits for the files (a second one aborts)
+            with hold_interrupts():
+                if video is not None:
+                    video.close()
+                diag.close()
+                if args.npz and snaps_x:
+                    np.savez_compressed(npz_path, x=np.stack(snaps_x), v=np.stack(snaps_v),
+                                        time=np.array(snaps_t), radius=scene.radius,
+                                        mass=scene.mass)
+                if renderer is not None:
+                    renderer.close()
+                written = [p for p, on in ((video_path, video is not None), (csv_path, True),
+                                           (npz_path, args.npz and bool(snaps_x)),
+                                           (ckpt_path, bool(args.checkpoint_every))) if on]
+                print(f"wrote {', '.join(written)} ({diag.rows} frames)", file=sys.stderr)
+        except KeyboardInterrupt:
+            status = EXIT_INTERRUPTED
+
     st = sim.stats
     print(f"simulation: {sim.sim_seconds:.2f} s wall for {sim.time:g} s simulated, "
           f"{st['steps']} steps, {st['pair_collisions']} pair + {st['wall_collisions']} wall "

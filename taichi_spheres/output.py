@@ -7,7 +7,7 @@ import os
 import numpy as np
 
 from . import observe
-from .checkpoint import hold_interrupts
+from .interrupts import hold_interrupts
 
 __all__ = ["VideoWriter", "DiagnosticsWriter", "CSV_COLUMNS", "check_writable"]
 

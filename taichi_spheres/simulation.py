@@ -73,7 +73,7 @@ def estimate_field_bytes(scene: Scene, precision: str = "f64",
                          step_fraction: float = DEFAULT_STEP_FRACTION) -> int:
     """Device memory a Simulation of ``scene`` allocates for its Taichi fields [bytes],
     counted per sphere and per grid cell without initialising Taichi (``cli info``).
-    tests/test_scene.py holds it to within 3 % of :meth:`Simulation.field_bytes`."""
+    tests/test_gas.py holds it to within 3 % of :meth:`Simulation.field_bytes`."""
     geom = GridGeometry.for_box(scene.box_lo, scene.box_hi, scene.periodic,
                                 float(scene.radius.max()), float(scene.radius.min()),
                                 scene.n, step_fraction)
