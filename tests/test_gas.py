@@ -260,6 +260,8 @@ def test_memory_estimate_matches_the_fields(arch, precision, kind):
                                  **{"periodic": scene.periodic, **kw})
     sim = ts.Simulation(scene, arch=arch, precision=precision)
     actual = sim.field_bytes()
-    assert actual > 2 * 3 * (8 if precision == "f64" else 4) * scene.n
+    real = 8 if precision == "f64" else 4
+    assert ts.simulation._field_nbytes(sim._state.x) == 3 * real * scene.n
+    assert actual > 2 * 3 * real * scene.n
     estimate = ts.simulation.estimate_field_bytes(scene, precision)
     assert abs(estimate / actual - 1) < 0.03, (kind, estimate, actual)
