@@ -263,6 +263,29 @@ class Grid:
                     out[a] = cb[a]
         return out
 
+    @ti.func
+    def forward(self, ci, cj, p, q):
+        """Whether the forward scan (FORWARD_ROWS) from the sphere at slot p, in cell ci,
+        reaches the sphere at slot q, in the equal-or-adjacent cell cj: the offset
+        cj - ci (wrapped into -1..1 on periodic axes) is lexicographically positive,
+        or zero with q after p."""
+        off = cj - ci
+        for a in ti.static(range(3)):
+            if ti.static(self.geom.periodic[a]):
+                n = ti.static(self.geom.dims[a])
+                if off[a] > 1:
+                    off[a] -= n
+                elif off[a] < -1:
+                    off[a] += n
+        out = q > p
+        if off[0] != 0:
+            out = off[0] > 0
+        elif off[1] != 0:
+            out = off[1] > 0
+        elif off[2] != 0:
+            out = off[2] > 0
+        return out
+
     # ---- build ----
     @ti.func
     def _exclusive_scan(self):

@@ -21,7 +21,7 @@ import taichi as ti
 from taichi.lang.util import to_numpy_type
 
 from . import runtime
-from .contacts import REST_TOLERANCE, Contacts, decode_status
+from .contacts import NEAR_CAPACITY, REST_TOLERANCE, Contacts, decode_status, near_allowance
 from .fused import FusedStep
 from .projection import DEFAULT_TOLERANCE, MAX_ITERATIONS, Projection
 from .grid import Grid, GridGeometry
@@ -55,6 +55,9 @@ DEFAULT_MAX_SWEEPS = 32
 # ~150 us per launch, more than the whole loop for small N
 _SERIAL_LIGHT_BELOW = 200_000
 _SERIAL_HEAVY_BELOW = 3_000
+#: From this many spheres on, detection keeps near lists (contacts.Contacts.detect);
+#: below, a scan costs little and the lists would lengthen compiling the fused step.
+NEAR_LISTS_FROM = _SERIAL_HEAVY_BELOW
 
 
 def rest_speed_for(scene: Scene, step_fraction: float = DEFAULT_STEP_FRACTION) -> float:
@@ -83,6 +86,8 @@ def estimate_field_bytes(scene: Scene, precision: str = "f64",
     # marked, touched, order, cell_of, slot, projection involved/near/stamp (+ support)
     per_sphere = 12 * real + 3 * real + 9 * 4 + (4 if features.supports else 0)
     per_sphere += (0 if features.equal_radii else real) + (0 if features.equal_masses else real)
+    if scene.n >= NEAR_LISTS_FROM and near_allowance(geom, float(scene.radius.max()))[1] > 0:
+        per_sphere += (NEAR_CAPACITY + 2) * 4 + 3 * real   # near, near_id, n_near; x_near
     per_cell = 7 * 4   # start, cursor; active, first_pair (2), active_list, by_colour
     return scene.n * per_sphere + geom.n_cells * per_cell
 
@@ -150,7 +155,8 @@ class Simulation:
         self._motion = Motion(self._state, self._params, self.features, serial_light)
         self._grid = Grid(self.geometry, self._state, serial_light)
         self._contacts = Contacts(self._state, self._grid, self._params, self._motion,
-                                  self.features, serial_light, serial_heavy, serial_few=cpu)
+                                  self.features, serial_light, serial_heavy, serial_few=cpu,
+                                  near_lists=n >= NEAR_LISTS_FROM)
         self._overlap_tolerance = DEFAULT_TOLERANCE
         self._projection = Projection(self._state, self._grid, self._contacts, self._motion,
                                       self.features, serial_light, self._overlap_tolerance)
@@ -168,7 +174,7 @@ class Simulation:
                             grid_rebuilds=0, multi_collision_spheres=0, rest_collisions=0,
                             supported_collisions=0, energy_pair_restitution=0.0,
                             energy_wall_restitution=0.0, energy_rest_rule=0.0, virial=0.0,
-                            projected_steps=0, projected_pairs=0)
+                            projected_steps=0, projected_pairs=0, near_list_detections=0)
         self.initial_energy = observe.total_energy(scene, scene.gravity)
         self.last_step = dict(h=0.0, unresolved=0, max_overlap=0.0, sweeps=0)
         self.sim_seconds = 0.0   # wall-clock time spent in advance()
@@ -221,7 +227,9 @@ class Simulation:
         energy_wall_restitution, energy_rest_rule (kinetic energy removed by each
         cause [J]; see :meth:`energy_budget`); virial (sum over pair collisions of
         r_ij . dp_i at contact [J s]: the collisional pressure over a time T in volume V
-        is virial / (3 V T)); plus time and dt."""
+        is virial / (3 V T)); near_list_detections (full detections taken from the
+        near lists instead of a grid scan: same pairs, see contacts.Contacts.detect);
+        plus time and dt."""
         out = dict(self._totals)
         out["time"] = self.time
         out["dt"] = self.last_step["h"]
@@ -345,7 +353,7 @@ class Simulation:
             self._params.h[None] = h
             self._motion.drift()
             self._grid.build()
-            remaining, _ = decode_status(self._contacts.detect_all())
+            remaining = self._detect()
         if remaining is not None:
             while remaining > 0 and sweeps < self.max_sweeps:
                 remaining, far = decode_status(self._contacts.sweep(remaining))
@@ -399,7 +407,14 @@ class Simulation:
         approaching overlaps found."""
         self._grid.build()
         self._totals["grid_rebuilds"] += 1
-        return decode_status(self._contacts.detect_all())[0]
+        return self._detect()
+
+    def _detect(self) -> int:
+        """Full detection on a freshly built grid (from the near lists when they still
+        cover); returns the approaching overlaps found."""
+        status, from_list = self._contacts.detect()
+        self._totals["near_list_detections"] += int(from_list)
+        return decode_status(status)[0]
 
     def _project(self) -> float:
         """Push apart pairs overlapping beyond the tolerance (projection.py); returns

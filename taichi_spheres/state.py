@@ -116,6 +116,7 @@ class SphereState:
         self.real = real
         self.features = features
         self.r0 = float(scene.radius[0])
+        self.r_max = float(scene.radius.max())
         self.m0 = float(scene.mass[0])
         self.box_lo = tuple(float(c) for c in scene.box_lo)
         self.box_hi = tuple(float(c) for c in scene.box_hi)

@@ -245,8 +245,9 @@ def test_parallel_colour_launches_give_the_serial_bits(arch, monkeypatch):
 @pytest.mark.parametrize("kind", ["gas", "radii", "masses", "gravity"])
 def test_memory_estimate_matches_the_fields(arch, precision, kind):
     """``cli info``'s estimate (no Taichi) stays within 3 % of the bytes the fields of a
-    built Simulation take, for each feature that adds fields."""
-    scene = gas(2000, packing=0.3, seed=3)
+    built Simulation take, for each feature that adds fields (near lists included:
+    3,500 spheres)."""
+    scene = gas(3500, packing=0.3, seed=3)
     rng = np.random.default_rng(0)
     radius, mass, kw = scene.radius, None, {}
     if kind == "radii":

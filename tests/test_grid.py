@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import taichi_spheres as ts
+from taichi_spheres import contacts
 from taichi_spheres.builders import gas
 from taichi_spheres.grid import BLOCK_PAIRS, GridGeometry
 
@@ -191,3 +192,58 @@ def test_cell_size_rules():
     assert short.dims == (3, 3, 3)
     with pytest.raises(ValueError, match="periodic axis x"):
         GridGeometry.for_box((0, 0, 0), (3.2, 3.4, 3.4), (True,) * 3, r, r, 20, f)
+
+
+def _runs_with_and_without_near_lists(scene, arch, monkeypatch, duration, capacities=(None,)):
+    """(state, stats) of ``scene`` advanced by ``duration`` [s] with near lists (one run
+    per list capacity, None: the default), then without (every detection scans)."""
+    runs = []
+    for capacity in capacities + ("scan",):
+        if capacity not in (None, "scan"):
+            monkeypatch.setattr(contacts, "NEAR_CAPACITY", capacity)
+        lists_from = scene.n + 1 if capacity == "scan" else ts.simulation.NEAR_LISTS_FROM
+        monkeypatch.setattr(ts.simulation, "NEAR_LISTS_FROM", lists_from)
+        sim = ts.Simulation(scene, arch=arch)
+        sim.advance(duration)
+        runs.append((sim.state(), sim.stats))
+        monkeypatch.undo()
+    return runs
+
+
+def _assert_same_run(a, b):
+    (sa, ta), (sb, tb) = a, b
+    np.testing.assert_array_equal(sa.x, sb.x)
+    np.testing.assert_array_equal(sa.v, sb.v)
+    for key in ("steps", "pair_collisions", "wall_collisions", "sweeps", "unresolved",
+                "grid_rebuilds", "projected_pairs"):
+        assert ta[key] == tb[key], key
+
+
+def test_near_lists_give_the_scan_bits_in_a_gas(arch, monkeypatch):
+    """Detections from near lists (Contacts.detect) find what the full grid scan finds:
+    an elastic periodic gas runs to the same bits and counts with and without them.
+    Lists serve most steps, longer than the two steps for which no sphere outruns
+    their allowance, so the spheres that did are scanned around (the fast-mover
+    path); lists that overflow their capacity are not used (and change nothing)."""
+    scene = gas(3500, packing=0.3, seed=5)
+    lists, overflowing, scan = _runs_with_and_without_near_lists(
+        scene, arch, monkeypatch, 1.0, capacities=(None, 1))
+    steps = scan[1]["steps"]
+    assert steps > 50 and scan[1]["pair_collisions"] > 5 * scene.n
+    assert scan[1]["near_list_detections"] == 0
+    assert overflowing[1]["near_list_detections"] == 0
+    assert lists[1]["near_list_detections"] > 0.6 * steps
+    _assert_same_run(lists, scan)
+    _assert_same_run(overflowing, scan)
+
+
+def test_near_lists_give_the_scan_bits_with_walls_and_gravity(arch, monkeypatch):
+    """The same with walls, gravity, inelastic pairs and walls and radii (and so masses)
+    spread over a factor 2: the lists' reach is set by the largest sphere, and the
+    orientation of a pair found from a list or around a fast mover is the scan's."""
+    scene = gas(3500, packing=0.2, periodic=(False, True, False), gravity=(0, 0, -9.81),
+                restitution=0.7, wall_restitution=0.8, polydispersity=0.5, seed=6)
+    lists, scan = _runs_with_and_without_near_lists(scene, arch, monkeypatch, 0.5)
+    assert lists[1]["near_list_detections"] > 0
+    assert scan[1]["wall_collisions"] > 0 and scan[1]["pair_collisions"] > scene.n
+    _assert_same_run(lists, scan)

@@ -85,19 +85,23 @@ def throughput_table(rows) -> list:
     body = [[f"{r['n']:,}" + ("*" if r.get("fused") else ""), r["precision"],
              f"{r['sphere_steps']:.3g}", f"{r['collisions']:.3g}",
              f"{r['sim_per_wall']:.3g}", f"{r['step_ms']:.3f}", f"{r['bare_ms']:.3f}",
-             f"{r['ratio']:.2f}", f"{r['sweeps']:.2f}", f"{r['compile_s']:.1f}"] for r in rows]
+             f"{r['ratio']:.2f}", f"{r['sweeps']:.2f}", f"{100 * r['near_share']:.0f} %",
+             f"{r['compile_s']:.1f}"] for r in rows]
     return ["## Throughput", "",
             "*ms/step* and the rates: consecutive steps, as `advance` takes them. "
             "*Simulated s / wall s*: simulated time advanced per second of wall time (the "
             "step length h shrinks as N grows because the fastest sphere is faster). *Bare "
-            "pass* = drift + grid build + neighbour scan; *full/bare* = full step / bare pass, "
-            "both timed on the same states (see the stage table). Rows marked *: the full "
-            "step is the fused step (one kernel besides the counter read-back), the bare "
-            "pass three launches, which favours the full step by a few launch costs "
-            "(~0.1 ms).", ""] + \
+            "pass* = drift + grid build + neighbour scan (a full scan of the grid, from the "
+            "stage table); *full/bare* = ms/step / bare pass. *Near lists*: share of the "
+            "steps whose detection used the near lists a full scan made a few steps before "
+            "instead of scanning the grid (same pairs and bits; `Contacts.detect`, from "
+            "3,000 spheres on). Rows marked *: the full step is the fused step (one kernel "
+            "besides the counter read-back), the bare pass three launches, which favours "
+            "the full step by a few launch costs (~0.1 ms).", ""] + \
         _table(["N", "precision", "sphere-steps/s", "collisions/s", "simulated s / wall s",
-                "ms/step", "bare pass ms", "full/bare", "sweeps/step", "compile+warm-up s"],
-               "|---:|:---:|---:|---:|---:|---:|---:|---:|---:|---:|", body) + [""]
+                "ms/step", "bare pass ms", "full/bare", "sweeps/step", "near lists",
+                "compile+warm-up s"],
+               "|---:|:---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|", body) + [""]
 
 
 def memory_table(rows, baseline) -> list:
@@ -149,7 +153,9 @@ def stage_table(rows) -> list:
             "with the detection around the spheres it changed; *counter reads* is the step "
             "reading its counters back), with `ti.sync()` after each, on the same states as "
             "the full steps they are compared with (each pass starts right after the same "
-            "untimed restore of the state); each figure is its fastest of the 3 blocks. "
+            "untimed restore of the state, which drops the near lists, so these steps all "
+            "detect by a full scan: the *detection* column is the bare pass's scan); each "
+            "figure is its fastest of the 3 blocks. "
             "Rows marked * run their full step as the fused step (below 3,000 spheres on "
             "the CPU: `taichi_spheres/fused.py`), so their stages, launched one by one, pay "
             "launch and read-back costs the full step does not. " +
