@@ -113,9 +113,10 @@ class Contacts:
     them, so that scans read the flag of a neighbour from contiguous memory and the
     re-detection can visit the touched spheres in cell order.
 
-    Near lists (near_lists=True, see :meth:`detect`): near (N, NEAR_CAPACITY) i32 —
-    per sphere, the spheres its forward scan found closer than ``near_reach``; n_near
-    (N,) i32 — how many; x_near (N,) vec3 — positions when the list was made;
+    Near lists (near_lists=True, see :meth:`detect`), indexed by the grid slot a
+    sphere had when the list was made: near_id (N,) i32 — that sphere; near (N,
+    NEAR_CAPACITY) i32 — the spheres its forward scan found closer than
+    ``near_reach``; n_near (N,) i32 — how many; x_near (N,) vec3 — its position then;
     near_ok () i32 — 1 when the last full scan fitted every sphere's list.
     """
 
@@ -838,10 +839,10 @@ class Contacts:
 
     def detect(self):
         """Full detection (fills ``active`` and count[REMAINING]) on a freshly built
-        grid; returns (status, from_list). From the near lists when they still hold
-        every pair that can overlap (no sphere moved more than the allowance since a
-        full scan made them: typically the step after it), else by a full scan, which
-        makes new lists. Both find the same pairs and give the same bits; the list
+        grid; returns (status, from_list). From the near lists while they are
+        complete and at most 1 sphere in NEAR_FAST_LIMIT moved more than the allowance
+        since a full scan made them (those are scanned around in the grid), else by a
+        full scan, which makes new lists. Both find the same pairs and give the same bits; the list
         examines about 2 pairs per sphere in a gas at packing fraction 0.3 instead of
         the scan's 14 (and its 5 row look-ups)."""
         if self.near_ready:

@@ -86,10 +86,16 @@ def estimate_field_bytes(scene: Scene, precision: str = "f64",
     # marked, touched, order, cell_of, slot, projection involved/near/stamp (+ support)
     per_sphere = 12 * real + 3 * real + 9 * 4 + (4 if features.supports else 0)
     per_sphere += (0 if features.equal_radii else real) + (0 if features.equal_masses else real)
-    if scene.n >= NEAR_LISTS_FROM and near_allowance(geom, float(scene.radius.max()))[1] > 0:
+    if _keeps_near_lists(scene, geom):
         per_sphere += (NEAR_CAPACITY + 2) * 4 + 3 * real   # near, near_id, n_near; x_near
     per_cell = 7 * 4   # start, cursor; active, first_pair (2), active_list, by_colour
     return scene.n * per_sphere + geom.n_cells * per_cell
+
+
+def _keeps_near_lists(scene: Scene, geom: GridGeometry) -> bool:
+    """Whether a Simulation of ``scene`` on grid ``geom`` keeps near lists: from
+    NEAR_LISTS_FROM spheres on, where the cells leave room for moves."""
+    return scene.n >= NEAR_LISTS_FROM and near_allowance(geom, float(scene.radius.max()))[1] > 0
 
 
 def _field_nbytes(field) -> int:
@@ -156,7 +162,7 @@ class Simulation:
         self._grid = Grid(self.geometry, self._state, serial_light)
         self._contacts = Contacts(self._state, self._grid, self._params, self._motion,
                                   self.features, serial_light, serial_heavy, serial_few=cpu,
-                                  near_lists=n >= NEAR_LISTS_FROM)
+                                  near_lists=_keeps_near_lists(scene, self.geometry))
         self._overlap_tolerance = DEFAULT_TOLERANCE
         self._projection = Projection(self._state, self._grid, self._contacts, self._motion,
                                       self.features, serial_light, self._overlap_tolerance)
