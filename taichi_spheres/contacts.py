@@ -62,6 +62,10 @@ COLLAPSE_HITS = 4
 #: Upper bound on collisions one owner cell resolves in one sweep (the rest wait
 #: for the next sweep).
 MAX_BLOCK_COLLISIONS = 64
+#: An owner cell keeps the first this many pairs its detection found (cell_pairs, 1
+#: or 2); a cell with no more pairs than that resolves them from the record, one with
+#: more searches its block for each collision (earliest_in_block: ~3 us at N = 1e5).
+RECORDED_PAIRS = 2
 
 #: A re-detection visits the touched spheres in cell order (reading every sphere's
 #: flag) when more than 1 in this many spheres were touched, else in list order (so
@@ -107,7 +111,8 @@ class Contacts:
     """Detection and colour-by-colour resolution of overlapping approaching pairs.
 
     Fields: active (M,) i32 — approaching overlapping pairs owned by each cell, found
-    by the last detection pass; first_pair (M,) vec2 i32 — one of them; active_list
+    by the last detection pass; cell_pairs (M, RECORDED_PAIRS) vec2 i32 — the first
+    of them found (in thread-dependent order); active_list
     (M,) / n_active — the cells with active > 0; touched (N,) / n_touched — spheres a
     sweep changed; marked (N,) i32 — 1 at the grid slot (``grid.slot``) of each of
     them, so that scans read the flag of a neighbour from contiguous memory and the
@@ -139,8 +144,9 @@ class Contacts:
         eps = float(np.finfo(np.float64 if self.real == ti.f64 else np.float32).eps)
         self.approach_eps = 8.0 * eps
         self.active = ti.field(ti.i32, shape=grid.m)
-        # the pair that made a cell active; used directly when it is the only one
-        self.first_pair = ti.Vector.field(2, ti.i32, shape=grid.m)
+        # the first pairs the detection counted for a cell (all of them when it found
+        # at most RECORDED_PAIRS), oriented as the forward scan meets them
+        self.cell_pairs = ti.Vector.field(2, ti.i32, shape=(grid.m, RECORDED_PAIRS))
         # stencils as small tables walked by runtime loops (unrolling them multiplies
         # compile time)
         self.fwd_rows = ti.Vector.field(4, ti.i32, shape=len(FORWARD_ROWS))
@@ -490,13 +496,15 @@ class Contacts:
                     ti.atomic_max(self.earliest[j], s)
                     cj = self.grid.coords(self.grid.cell_of[j])
                     owner = self.grid.linear(self.grid.owner(ci, cj))
-                    if ti.atomic_add(self.active[owner], 1) == 0:
+                    found = ti.atomic_add(self.active[owner], 1)
+                    if found < RECORDED_PAIRS:
                         # oriented as the forward scan meets it, whichever pass found it
                         # (the bits of a collision depend on the order of its spheres)
                         if self.grid.forward(ci, cj, self.grid.slot[i], q):
-                            self.first_pair[owner] = ti.Vector([i, j])
+                            self.cell_pairs[owner, found] = ti.Vector([i, j])
                         else:
-                            self.first_pair[owner] = ti.Vector([j, i])
+                            self.cell_pairs[owner, found] = ti.Vector([j, i])
+                    if found == 0:
                         self.active_list[ti.atomic_add(self.n_active[None], 1)] = owner
                     ti.atomic_add(self.params.count[REMAINING], 1)
                     ti.atomic_max(self.params.vals[OPEN_OVERLAP], rel)
@@ -715,25 +723,55 @@ class Contacts:
     def resolve_cell(self, c, k):
         """Collide the pairs owned by cell c (vec3, linear index k), earliest contact
         first, as many as the last detection counted there (at most
-        MAX_BLOCK_COLLISIONS). A cell with one pair uses the pair detection recorded
-        (if an earlier colour of this sweep changed it, it is re-checked)."""
+        MAX_BLOCK_COLLISIONS): each time the earliest among the pairs cell_pairs
+        recorded when it holds them all, else by searching the block."""
         budget = ti.min(self.active[k], MAX_BLOCK_COLLISIONS)
         for _it in range(budget):
             bi = -1
             bj = -1
             s = ti.cast(-1, self.real)
-            if budget == 1:
-                bi = self.first_pair[k][0]
-                bj = self.first_pair[k][1]
-                s = self.pair_contact(bi, bj)
-                if not self.eligible(bi, bj, s):
-                    bi = -1
+            if budget <= RECORDED_PAIRS:
+                bi, bj, s = self.earliest_recorded(k, budget)
             else:
                 bi, bj, s = self.earliest_in_block(c)
             if bi < 0:
                 break
-            self.collide(bi, bj, s)
+            self.collide(bi, bj, s)   # (one inlined copy: compile time, and equal bits)
         self.active[k] = 0
+
+    @ti.func
+    def earliest_recorded(self, k, count):
+        """earliest_in_block among the count (1 or 2) pairs cell k recorded: (i, j, s)
+        of the eligible one with the earliest contact, or i = -1 (on a tie the pair
+        with the lower sphere ids: the record's order depends on threads). Each pair
+        is checked as it is now (pair_contact): an earlier colour or the other pair may
+        have changed it since the detection."""
+        a = self.cell_pairs[k, 0]
+        b = a
+        if ti.static(RECORDED_PAIRS == 2):
+            if count == 2:
+                b = self.cell_pairs[k, 1]
+                lo_a = ti.min(a[0], a[1])
+                lo_b = ti.min(b[0], b[1])
+                if lo_b < lo_a or (lo_b == lo_a and ti.max(b[0], b[1]) < ti.max(a[0], a[1])):
+                    t = a
+                    a = b
+                    b = t
+        bi = -1
+        bj = -1
+        best = ti.cast(-1, self.real)
+        sa = self.pair_contact(a[0], a[1])
+        if self.eligible(a[0], a[1], sa):
+            bi = a[0]
+            bj = a[1]
+            best = sa
+        if count == 2:
+            sb = self.pair_contact(b[0], b[1])
+            if sb > best and self.eligible(b[0], b[1], sb):
+                bi = b[0]
+                bj = b[1]
+                best = sb
+        return bi, bj, best
 
     @ti.func
     def colour_index(self, c):

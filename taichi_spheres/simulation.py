@@ -88,7 +88,7 @@ def estimate_field_bytes(scene: Scene, precision: str = "f64",
     per_sphere += (0 if features.equal_radii else real) + (0 if features.equal_masses else real)
     if _keeps_near_lists(scene, geom):
         per_sphere += (NEAR_CAPACITY + 2) * 4 + 3 * real   # near, near_id, n_near; x_near
-    per_cell = 7 * 4   # start, cursor; active, first_pair (2), active_list, by_colour
+    per_cell = 9 * 4   # start, cursor; active, cell_pairs (2 x 2), active_list, by_colour
     return scene.n * per_sphere + geom.n_cells * per_cell
 
 

@@ -247,3 +247,28 @@ def test_near_lists_give_the_scan_bits_with_walls_and_gravity(arch, monkeypatch)
     assert lists[1]["near_list_detections"] > 0
     assert scan[1]["wall_collisions"] > 0 and scan[1]["pair_collisions"] > scene.n
     _assert_same_run(lists, scan)
+
+
+def test_recorded_pairs_resolve_as_the_block_search(arch, precision, monkeypatch):
+    """A cell that detection found two pairs for resolves them from its record
+    (Contacts.resolve_recorded) as searching its block does (RECORDED_PAIRS = 1 sends
+    every such cell to earliest_in_block): the same collisions, earliest first, in a
+    dense elastic gas where such cells are common, to the bit (a recorded pair keeps
+    the order the forward scan met its spheres in, which is the block's order)."""
+    scene = gas(3500, packing=0.4, seed=7)
+    probe = ts.Simulation(scene, arch=arch, precision=precision)
+    probe._params.h[None] = probe.max_step()
+    probe._motion.drift()
+    probe._grid.build()
+    probe._contacts.detect_all()
+    assert np.count_nonzero(probe._contacts.active.to_numpy() == 2) > 10
+    runs = []
+    for recorded in (2, 1):
+        monkeypatch.setattr(contacts, "RECORDED_PAIRS", recorded)
+        sim = ts.Simulation(scene, arch=arch, precision=precision)
+        for _ in range(10):
+            sim.step(sim.max_step())
+        runs.append((sim.state(), sim.stats))
+        monkeypatch.undo()
+    assert runs[0][1]["pair_collisions"] > scene.n
+    _assert_same_run(*runs)
