@@ -741,11 +741,12 @@ class Contacts:
 
     @ti.func
     def earliest_recorded(self, k, count):
-        """earliest_in_block among the count (1 or 2) pairs cell k recorded: (i, j, s)
-        of the eligible one with the earliest contact, or i = -1 (on a tie the pair
-        with the lower sphere ids: the record's order depends on threads). Each pair
-        is checked as it is now (pair_contact): an earlier colour or the other pair may
-        have changed it since the detection."""
+        """What earliest_in_block finds, searching only the count (1 or 2) pairs cell k
+        recorded: (i, j, s) of the eligible one with the earliest contact, or i = -1
+        (on a tie the pair with the lower sphere ids: the record's order depends on
+        threads). Each pair is checked as it is now (pair_contact): an earlier colour
+        or the other pair may have changed it since the detection; eligible() runs on
+        both, so a pair that must wait marks its spheres for the next sweep."""
         a = self.cell_pairs[k, 0]
         b = a
         if ti.static(RECORDED_PAIRS == 2):

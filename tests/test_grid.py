@@ -251,7 +251,7 @@ def test_near_lists_give_the_scan_bits_with_walls_and_gravity(arch, monkeypatch)
 
 def test_recorded_pairs_resolve_as_the_block_search(arch, precision, monkeypatch):
     """A cell that detection found two pairs for resolves them from its record
-    (Contacts.resolve_recorded) as searching its block does (RECORDED_PAIRS = 1 sends
+    (Contacts.earliest_recorded) as searching its block does (RECORDED_PAIRS = 1 sends
     every such cell to earliest_in_block): the same collisions, earliest first, in a
     dense elastic gas where such cells are common, to the bit (a recorded pair keeps
     the order the forward scan met its spheres in, which is the block's order)."""
