@@ -131,9 +131,7 @@ def cmd_info(scene: Scene, args):
     from .state import Features
     run, physics, render = _settings(scene)
     fraction = physics.get("step_fraction", DEFAULT_STEP_FRACTION)
-    geom = GridGeometry.for_box(scene.box_lo, scene.box_hi, scene.periodic,
-                                float(scene.radius.max()), float(scene.radius.min()),
-                                scene.n, fraction)
+    geom = GridGeometry.for_scene(scene, fraction)
     precision = physics.get("precision") or ("f32" if args.arch in ("vulkan", "metal") else "f64")
     rest_speed = rest_speed_for(scene, fraction)
     features = Features.from_scene(scene, rest_speed)

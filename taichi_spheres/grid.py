@@ -77,6 +77,14 @@ class GridGeometry:
     slack: float
 
     @classmethod
+    def for_scene(cls, scene, step_fraction):
+        """for_box for a Scene's box, radii and sphere count (what Simulation builds,
+        and what the memory estimate counts)."""
+        return cls.for_box(scene.box_lo, scene.box_hi, scene.periodic,
+                           float(scene.radius.max()), float(scene.radius.min()), scene.n,
+                           step_fraction)
+
+    @classmethod
     def for_box(cls, lo, hi, periodic, r_max, r_min, n, step_fraction):
         slack = step_fraction * r_min
         # the grid is built after the drift, so the margin is for the moves that come

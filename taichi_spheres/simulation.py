@@ -77,9 +77,7 @@ def estimate_field_bytes(scene: Scene, precision: str = "f64",
     """Device memory a Simulation of ``scene`` allocates for its Taichi fields [bytes],
     counted per sphere and per grid cell without initialising Taichi (``cli info``).
     tests/test_gas.py holds it to within 3 % of :meth:`Simulation.field_bytes`."""
-    geom = GridGeometry.for_box(scene.box_lo, scene.box_hi, scene.periodic,
-                                float(scene.radius.max()), float(scene.radius.min()),
-                                scene.n, step_fraction)
+    geom = GridGeometry.for_scene(scene, step_fraction)
     features = Features.from_scene(scene, rest_speed_for(scene, step_fraction))
     real = 8 if precision == "f64" else 4
     # x, v, grid.xs, projection push (4 vec3), moved, earliest, projection rmax; hits,
@@ -146,9 +144,7 @@ class Simulation:
                                      wall_axes=self.features.wall_axes, equal_radii=False,
                                      equal_masses=False, elastic=False, elastic_walls=False,
                                      smid=self.features.smid, rest_rule=self.features.rest_rule)
-        self.geometry = GridGeometry.for_box(
-            scene.box_lo, scene.box_hi, scene.periodic, float(scene.radius.max()),
-            float(scene.radius.min()), scene.n, step_fraction)
+        self.geometry = GridGeometry.for_scene(scene, step_fraction)
         self.runtime = runtime.ensure(arch, precision, threads)
         self.precision = self.runtime.precision
         real = ti.f64 if self.precision == "f64" else ti.f32
