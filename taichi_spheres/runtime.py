@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import os
 
+import numpy as np
 import taichi as ti
 
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
@@ -102,10 +103,73 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
         _current = None
         raise RuntimeError(f"arch {arch!r} is not available on this machine "
                            f"(Taichi fell back to the CPU); use arch='cpu'")
+    if actual not in ("x64", "arm64"):
+        refuse_broken_loops(arch, actual, probe_loops())
     _generation += 1
     _current = Runtime(arch=arch, actual=actual, precision=want, threads=threads,
                        generation=_generation, compile=mode)
     return _current
+
+
+#: The loop nest of probe_loops: parallel iterations x rows x spheres per row.
+PROBE_SHAPE = (4, 5, 2)
+
+
+def probe_loops() -> tuple:
+    """(counted, expected) of a probe of the pattern every grid walk of the engine
+    relies on: a parallel loop (over spheres), in it a loop over stencil rows, in that
+    a loop over the spheres of a row (bounds read from a field) holding integer
+    atomics, onto one counter and onto per-sphere counts. Mesa's lavapipe 22.3
+    (Debian 12's Vulkan for machines without a GPU) leaves the row loop after its
+    first row here (and Mesa 25 does not), which would silently drop most pairs from
+    the detection. Run right after ti.init (allocates and frees its own fields)."""
+    outer, rows, per_row = PROBE_SHAPE
+    builder = ti.FieldsBuilder()
+    start = ti.field(ti.i32)
+    hits = ti.field(ti.i32)
+    total = ti.field(ti.i32)
+    builder.dense(ti.i, rows + 1).place(start)
+    builder.dense(ti.i, rows * per_row).place(hits)
+    builder.place(total)
+    tree = builder.finalize()
+    try:
+        start.from_numpy(np.arange(0, rows * per_row + 1, per_row, dtype=np.int32))
+
+        @ti.kernel
+        def walk():
+            for _t in range(outer):
+                for k in range(rows):
+                    for q in range(start[k], start[k + 1]):
+                        ti.atomic_add(hits[q], 1)
+                        ti.atomic_add(total[None], 1)
+
+        walk()
+        per_sphere = hits.to_numpy()
+        # the counter's total, or when a sphere's own count is off, the visits it got
+        # (capped, so that an extra visit cannot make up for a missing one)
+        counted = int(total[None])
+        if (per_sphere != outer).any():
+            counted = int(np.minimum(per_sphere, outer).sum()) - int((per_sphere > outer).sum())
+    finally:
+        tree.destroy()
+    return counted, outer * rows * per_row
+
+
+def refuse_broken_loops(arch: str, actual: str, probe: tuple) -> None:
+    """Reset Taichi and raise RuntimeError when ``probe`` (probe_loops' counted,
+    expected) shows the backend runs the grid's loop nests wrongly."""
+    global _current
+    counted, expected = probe
+    if counted == expected:
+        return
+    ti.reset()
+    _current = None
+    raise RuntimeError(
+        f"arch {arch!r}: this {actual} driver runs integer atomics inside nested loops "
+        f"wrongly (a probe of the grid's loop pattern counted {counted} of {expected}), so "
+        f"the simulation would silently miss collisions. Mesa's lavapipe 22.x (Debian 12's "
+        f"Vulkan without a GPU) does this; use arch='cpu' (faster there anyway) or a GPU "
+        f"driver.")
 
 
 def _alive(rt: Runtime) -> bool:

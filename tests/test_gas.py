@@ -188,6 +188,30 @@ def test_compile_mode_choices(monkeypatch):
     assert compile_mode("auto", AUTO_FAST_BELOW) == "optimized"
 
 
+def test_loop_probe_passes_on_this_arch(arch):
+    """The arch under test runs the grid walks' loop pattern (integer atomics in a loop
+    over rows in a parallel loop) correctly: every visit counted, once."""
+    from taichi_spheres import runtime
+    runtime.ensure(arch)
+    outer, rows, per_row = runtime.PROBE_SHAPE
+    assert runtime.probe_loops() == (outer * rows * per_row, outer * rows * per_row)
+
+
+def test_a_driver_failing_the_loop_probe_is_refused(arch):
+    """A backend that drops visits in the probe (as Mesa's lavapipe 22 does) gets a
+    RuntimeError that says what is wrong and what to use instead, not a simulation
+    that silently misses collisions; Taichi is reset, and the next ensure starts it
+    again."""
+    from taichi_spheres import runtime
+    runtime.ensure(arch)
+    with pytest.raises(RuntimeError, match=r"counted 8 of 40.*miss collisions.*arch='cpu'"):
+        runtime.refuse_broken_loops("vulkan", "vulkan", (8, 40))
+    sim = ts.Simulation(gas(10, packing=0.05, periodic=True), arch=arch)
+    sim.advance(0.01)
+    runtime.refuse_broken_loops("vulkan", "vulkan", (40, 40))   # passes: no error
+    sim.advance(0.01)
+
+
 def test_bad_simulation_arguments(arch):
     scene = gas(10, packing=0.05, periodic=True)
     with pytest.raises(ValueError, match="arch"):

@@ -6,11 +6,13 @@ periodic cube), the second with module constants patched while it is built, comp
 and steps (the patches are active around every step of B, so constants read at
 construction, at compile time through ``ti.static`` or in Python per step all take
 the new value; a constant another module imported by name is not reached), then
-times their steps alternately, A then B then B then A, ..., so that the drift of a
-shared machine's speed (+-25 % from minute to minute here) hits both alike. Reports
-the median of the per-pair ratios B/A with its quartiles (quartiles on both sides of
-1 mean the difference is within the noise), and whether both runs made the same
-collisions (tuning constants change speed, not physics).
+times blocks of --block consecutive steps alternately, A then B then B then A, ...,
+so that the drift of a shared machine's speed (+-25 % from minute to minute here)
+hits both alike (a block holds whole cycles of full scans and near-list detections,
+which single steps would pair against each other). Reports the median of the ratios
+B/A per pair of blocks with its quartiles (quartiles on both sides of 1 mean the
+difference is within the noise), the ratio of the total times, and whether both runs
+made the same collisions (tuning constants change speed, not physics).
 
     python tools/ab_step.py --n 100000 contacts.DENSE_TOUCHED=1
     python tools/ab_step.py --n 100000 --shuffle contacts.DENSE_TOUCHED=1
@@ -37,6 +39,8 @@ def main():
                     help="constants of taichi_spheres modules to set for run B")
     ap.add_argument("--n", type=int, default=100_000)
     ap.add_argument("--steps", type=int, default=60, help="timed steps per run")
+    ap.add_argument("--block", type=int, default=10,
+                    help="consecutive steps timed together (a full scan every few steps)")
     ap.add_argument("--precision", default="f64")
     ap.add_argument("--shuffle", action="store_true")
     args = ap.parse_args()
@@ -93,22 +97,26 @@ def main():
     for k, sim in enumerate(sims):
         for _ in range(5):      # compiles (most of) its kernels
             patched(k, lambda: sim.step(sim.max_step()))
+    # blocks of consecutive steps, so that each block holds whole cycles of full scans
+    # and near-list detections (single steps of A and B would pair a scan with a list)
     times = [[], []]
-    for rep in range(args.steps):
+    for rep in range(max(1, args.steps // args.block)):
         for k in (rep % 2, 1 - rep % 2):
             sim = sims[k]
-            h = sim.max_step()
             ti.sync()
             t0 = time.perf_counter()
-            patched(k, lambda: sim.step(h))
+            for _ in range(args.block):
+                h = sim.max_step()
+                patched(k, lambda: sim.step(h))
             ti.sync()
-            times[k].append(time.perf_counter() - t0)
+            times[k].append((time.perf_counter() - t0) / args.block)
     a, b = (np.array(t) * 1e3 for t in times)
     q1, med, q3 = np.percentile(b / a, [25, 50, 75])
     same = all(sims[0].stats[k] == sims[1].stats[k] for k in ("pair_collisions", "sweeps"))
     print(f"N={args.n} {args.precision}{' shuffled' if args.shuffle else ''}, B: {' '.join(args.patches)}")
-    print(f"A median {np.median(a):.2f} ms/step, B median {np.median(b):.2f} ms/step; "
-          f"B/A per pair: median {med:.3f} (quartiles {q1:.3f}-{q3:.3f}); "
+    print(f"A median {np.median(a):.2f} ms/step, B median {np.median(b):.2f} ms/step "
+          f"(blocks of {args.block} steps); B/A per pair of blocks: median {med:.3f} "
+          f"(quartiles {q1:.3f}-{q3:.3f}), total {b.sum() / a.sum():.3f}; "
           f"same collisions: {same}")
 
 
