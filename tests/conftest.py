@@ -57,3 +57,10 @@ def precision(request, arch):
 def tol(precision, factor=1.0):
     """Relative tolerance: factor x machine epsilon of the precision."""
     return factor * EPS[precision]
+
+
+def tol_for(sim, f64_value, f32_factor):
+    """Tolerance for a test that runs its arch's default precision (f64 on the CPU and
+    CUDA, f32 on Vulkan and Metal): f64_value in f64, f32_factor x f32's machine
+    epsilon in f32."""
+    return f64_value if sim.precision == "f64" else tol("f32", f32_factor)

@@ -5,7 +5,7 @@ import pytest
 
 import taichi_spheres as ts
 from taichi_spheres.builders import gas
-from conftest import tol
+from conftest import tol, tol_for
 
 
 def _invariants(st, gravity=(0, 0, 0)):
@@ -55,8 +55,9 @@ def test_unequal_masses_and_radii_conserve_energy(arch):
     sim.advance(3.0)
     e1, p1 = _invariants(sim.state())
     assert sim.stats["pair_collisions"] > 5 * scene.n
-    assert abs(e1 / e0 - 1) < 1e-12
-    assert np.all(np.abs(p1 - p0) < 1e-12 * np.sqrt(2 * e0 * mass.sum()))
+    assert abs(e1 / e0 - 1) < tol_for(sim, 1e-12, 2e2)
+    p_scale = np.sqrt(2 * e0 * mass.sum())
+    assert np.all(np.abs(p1 - p0) < tol_for(sim, 1e-12, 1e3) * p_scale)
 
 
 def test_same_scene_gives_identical_bits(arch):
@@ -70,7 +71,13 @@ def test_same_scene_gives_identical_bits(arch):
         runs.append((st.x, st.v, sim.stats))
     assert runs[0][2]["pair_collisions"] > 500
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
-    assert runs[0][2] == runs[1][2]
+    for key, value in runs[0][2].items():
+        if arch != "cpu" and (key.startswith("energy") or key == "virial"):
+            # on a GPU the energy books and the virial are sums of float atomics from
+            # parallel threads, added in the order the threads come: equal to round-off
+            assert runs[1][2][key] == pytest.approx(value, rel=tol(sim.precision, 1e2)), key
+        else:
+            assert runs[1][2][key] == value, key
 
 
 def test_bits_do_not_depend_on_thread_count(arch):
@@ -261,7 +268,7 @@ def test_parallel_colour_launches_give_the_serial_bits(arch, monkeypatch):
         for key, value in stats_a.items():
             # energy books are sums of float atomics: their order may differ in parallel
             if key.startswith("energy") or key == "virial":
-                assert stats_b[key] == pytest.approx(value, rel=1e-12)
+                assert stats_b[key] == pytest.approx(value, rel=tol_for(sim, 1e-12, 1e2)), key
             else:
                 assert stats_b[key] == value, key
 

@@ -12,7 +12,7 @@ from taichi_spheres import projection
 from taichi_spheres.builders import gas
 from taichi_spheres.contacts import REST_TOLERANCE
 from taichi_spheres.scenefile import scene_from_dict
-from conftest import tol
+from conftest import tol, tol_for
 
 
 @pytest.mark.parametrize("e", [0.5, 0.8])
@@ -231,7 +231,8 @@ def test_smid_rule_loses_more_than_normal_on_grazing_contacts(arch):
         sim = ts.Simulation(_pair([1.0, 0.0, 0.0], 0.95, 0.5, model), arch=arch)
         sim.advance(0.5)
         losses[model] = sim.energy_budget()["pair_restitution"]
-    assert losses["smid"] / losses["normal"] == pytest.approx(1 / (1 - 0.95 ** 2), rel=1e-9)
+    assert losses["smid"] / losses["normal"] == pytest.approx(1 / (1 - 0.95 ** 2),
+                                                              rel=tol_for(sim, 1e-9, 1e2))
 
 
 # ---- extreme geometries: never a NaN, books balance ----
@@ -250,11 +251,14 @@ def test_grazing_collision_is_finite_and_conservative(arch, offset):
     sim.advance(0.5)
     st = sim.state()
     assert _finite(st)
+    # the arch's default precision (in f32 the offset rounds away: a touching graze)
+    rel = tol(sim.precision, 45)     # 1e-14 in f64
     assert ts.observe.total_energy(st, scene.gravity) == pytest.approx(
-        ts.observe.total_energy(st0, scene.gravity), rel=1e-14)
-    assert np.allclose(ts.observe.momentum(st), ts.observe.momentum(st0), atol=1e-14)
-    # the transverse kick is at most of order sqrt(1e-12)
-    assert abs(st.v[0, 1]) < 1e-5
+        ts.observe.total_energy(st0, scene.gravity), rel=rel)
+    assert np.allclose(ts.observe.momentum(st), ts.observe.momentum(st0), atol=rel)
+    # the transverse kick is at most of order sqrt(offset) (in f32, the coordinates'
+    # rounding sets the offset)
+    assert abs(st.v[0, 1]) < (1e-5 if sim.precision == "f64" else 10 * np.sqrt(tol("f32")))
 
 
 def test_head_on_equal_masses_exchange_velocities(arch, precision):
@@ -314,9 +318,10 @@ def test_heavy_intruder_mass_ratio_1e6_books_balance(arch):
     st = sim.state()
     assert sim.stats["pair_collisions"] > 3 * scene.n
     e0, e1 = (ts.observe.total_energy(s, (0, 0, 0)) for s in (st0, st))
-    assert abs(e1 / e0 - 1) < 1e-12
+    assert abs(e1 / e0 - 1) < tol_for(sim, 1e-12, 1e2)
     p_scale = np.sqrt(2 * e0 * mass.sum())
-    assert np.all(np.abs(ts.observe.momentum(st) - ts.observe.momentum(st0)) < 1e-12 * p_scale)
+    assert np.all(np.abs(ts.observe.momentum(st) - ts.observe.momentum(st0))
+                  < tol_for(sim, 1e-12, 1e3) * p_scale)
 
 
 def test_radius_ratio_10_books_balance(arch):
@@ -339,7 +344,7 @@ def test_radius_ratio_10_books_balance(arch):
     sim.advance(2.0)
     st = sim.state()
     assert sim.stats["pair_collisions"] > 400
-    assert abs(ts.observe.total_energy(st, (0, 0, 0)) / e0 - 1) < 1e-12
+    assert abs(ts.observe.total_energy(st, (0, 0, 0)) / e0 - 1) < tol_for(sim, 1e-12, 1e2)
     assert sim.stats["max_overlap"] < 0.05
     brute = [(i, j) for i in range(scene.n) for j in range(i + 1, scene.n)
              if np.linalg.norm(st.x[i] - st.x[j]) < radius[i] + radius[j]]
@@ -359,9 +364,10 @@ def test_very_fast_sphere_does_not_tunnel(arch):
     st = sim.state()
     assert _finite(st)
     assert sim.stats["wall_collisions"] > 5 and sim.stats["pair_collisions"] > 5
-    assert abs(ts.observe.total_energy(st, (0, 0, 0)) / e0 - 1) < 1e-12
-    assert np.all(st.x - st.radius[:, None] >= scene.box_lo - 1e-12)
-    assert np.all(st.x + st.radius[:, None] <= scene.box_hi + 1e-12)
+    assert abs(ts.observe.total_energy(st, (0, 0, 0)) / e0 - 1) < tol_for(sim, 1e-12, 1e2)
+    slack = tol_for(sim, 1e-12, 1e2) * np.abs(scene.box_hi).max()   # f32: of the coordinates
+    assert np.all(st.x - st.radius[:, None] >= scene.box_lo - slack)
+    assert np.all(st.x + st.radius[:, None] <= scene.box_hi + slack)
     d = np.linalg.norm(st.x[:, None] - st.x[None], axis=-1) + np.eye(scene.n) * 9
     assert np.min(d / (st.radius[:, None] + st.radius[None])) > 1 - 1e-6
 
@@ -396,13 +402,13 @@ def test_inelastic_collapse_does_not_stall(arch):
         for _ in range(10):
             sim.advance(0.05)
             energies.append(ts.observe.kinetic_energy(sim.state()))
-        assert np.all(np.diff([e0] + energies) <= 1e-12 * e0)
+        assert np.all(np.diff([e0] + energies) <= tol_for(sim, 1e-12, 1e2) * e0)
         assert energies[-1] < 0.5 * e0
         assert sim.stats["sweeps"] <= sim.max_sweeps * sim.stats["steps"]
         assert sim.stats["max_overlap"] < 0.02
         assert _finite(sim.state())
         b = sim.energy_budget()
-        assert abs(b["unaccounted"]) < 1e-9 * e0
+        assert abs(b["unaccounted"]) < tol_for(sim, 1e-9, 1e2) * e0
 
 
 def test_fused_step_hands_over_to_kernels_after_a_rebuild(arch):
