@@ -65,7 +65,10 @@ for target in "${targets[@]}"; do
     for node in $("$PY" -m pytest --collect-only -q --arch vulkan "$target" 2>/dev/null \
                   | grep :: | grep -v f64); do
         t0=$(date +%s)
-        timeout 600 "$PY" -m pytest -q -p no:cacheprovider --arch vulkan "$node" > out/vulkan_one.log 2>&1
+        # (in a subshell that is not replaced by the command, so that the shell's own
+        # "Segmentation fault" goes to the log)
+        ( timeout 600 "$PY" -m pytest -q -p no:cacheprovider --arch vulkan "$node"; exit $? ) \
+            > out/vulkan_one.log 2>&1
         rc=$?
         summary=$(grep -E "passed|failed|skipped|error" out/vulkan_one.log | tail -1)
         echo "$rc $(( $(date +%s) - t0 ))s $node $summary" | tee -a "$out"
@@ -74,4 +77,6 @@ for target in "${targets[@]}"; do
         fi
     done
 done
-echo "passed: $(grep -c '^0 ' "$out"), failed or crashed: $(grep -vc '^0 ' "$out") (details: $out)"
+echo "passed: $(grep -c '^0 .* passed' "$out"), skipped: $(grep -c '^0 .* skipped' "$out"),"\
+     "failed: $(grep -c '^1 ' "$out"), crashed or past 600 s: $(grep -cE '^(13[0-9]|12[4-9]) ' "$out")"\
+     "(details: $out)"
