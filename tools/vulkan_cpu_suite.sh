@@ -10,7 +10,7 @@
 # installed system-wide) and points the Vulkan loader at it for the test processes only.
 #
 # One pytest process per test: under Taichi 1.7.4, Mesa 25's lavapipe crashes
-# (segfault in vkAllocateDescriptorSets) after some 20,000-40,000 kernel launches in
+# (segfault in vkAllocateDescriptorSets) after some tens of thousands of kernel launches in
 # one process, which a long test or a whole file reaches. f64 tests are skipped (slow
 # on lavapipe, and Vulkan runs f32 by default). Results go to out/vulkan_suite.txt
 # (exit status, seconds, test, pytest's summary line); the logs of failures beside it.
