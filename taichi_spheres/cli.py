@@ -126,13 +126,14 @@ def _settings(scene: Scene):
 
 
 def cmd_info(scene: Scene, args):
+    from . import runtime
     from .grid import GridGeometry
     from .simulation import DEFAULT_STEP_FRACTION, estimate_field_bytes, rest_speed_for
     from .state import Features
     run, physics, render = _settings(scene)
     fraction = physics.get("step_fraction", DEFAULT_STEP_FRACTION)
     geom = GridGeometry.for_scene(scene, fraction)
-    precision = physics.get("precision") or ("f32" if args.arch in ("vulkan", "metal") else "f64")
+    precision = physics.get("precision") or runtime.default_precision(args.arch)
     rest_speed = rest_speed_for(scene, fraction)
     features = Features.from_scene(scene, rest_speed)
     memory = estimate_field_bytes(scene, precision, fraction)
