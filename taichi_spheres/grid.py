@@ -27,6 +27,9 @@ __all__ = ["GridGeometry", "Grid", "BLOCK_PAIRS", "FORWARD_ROWS", "ALL_ROWS", "S
 SCAN_BLOCK = 1024
 #: At most about this many cells per sphere: dilute scenes keep memory O(N).
 MAX_CELLS_PER_SPHERE = 8.0
+#: Cells aim at the largest diameter plus this many times the largest move per step
+#: (step_fraction x smallest radius): see GridGeometry.for_box.
+WIDE_MARGIN = 4.0
 
 
 def _block_pairs():
@@ -93,7 +96,7 @@ class GridGeometry:
         # makes re-binnings mid-step common in dense gases (min_cell is what the
         # stencil needs, wide_cell what the grid aims at)
         min_cell = 2.0 * r_max + 2.0 * slack
-        wide_cell = 2.0 * r_max + 4.0 * slack
+        wide_cell = 2.0 * r_max + WIDE_MARGIN * slack
         # no more cells than MAX_CELLS_PER_SPHERE per sphere: dilute scenes keep memory O(N)
         volume = math.prod(h - l for l, h in zip(lo, hi))
         target = max(wide_cell, (volume / (MAX_CELLS_PER_SPHERE * max(n, 1))) ** (1 / 3))
