@@ -143,6 +143,10 @@ class Contacts:
         self.box_size = tuple(float(hi - lo) for lo, hi in zip(state.box_lo, state.box_hi))
         eps = float(np.finfo(np.float64 if self.real == ti.f64 else np.float32).eps)
         self.approach_eps = 8.0 * eps
+        # round-off allowance of the cells a walk skips (examine_around) [m]: positions
+        # and cell faces carry a few eps of the largest coordinate
+        extent = max(max(abs(a), abs(b)) for a, b in zip(state.box_lo, state.box_hi))
+        self.walk_margin = 64.0 * eps * (extent + max(grid.geom.cell))
         self.active = ti.field(ti.i32, shape=grid.m)
         # the first pairs the detection counted for a cell (all of them when it found
         # at most RECORDED_PAIRS), oriented as the forward scan meets them
@@ -661,15 +665,22 @@ class Contacts:
     @ti.func
     def examine_around(self, i, p):
         """examine (only_new) sphere i, at slot p of the grid, against every sphere of
-        its 27 cells."""
+        the cells among its 27 that can hold a sphere overlapping it: a neighbour across
+        a face only if i is within r_i + r_max + M of that face, M = vals[MOVED] (no
+        sphere moved farther since the grid was built; plus a round-off margin): the
+        same pairs as all 27 cells, with fewer rows and cells visited."""
         ci = self.grid.coords(self.grid.cell_of[i])
         xi = self.grid.xs[p]
-        for k in range(ti.static(len(ALL_ROWS))):
-            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
-            for q in range(a0, b0):
-                self.examine(xi, i, q, ci, False, True)
-            for q in range(a1, b1):
-                self.examine(xi, i, q, ci, False, True)
+        reach = self.state.rad(i) + ti.cast(ti.static(self.state.r_max + self.walk_margin), self.real) + \
+            self.params.vals[MOVED]
+        lower, upper = self.grid.sides_within(ci, xi, reach)
+        for dx in range(-lower[0], upper[0] + 1):
+            for dy in range(-lower[1], upper[1] + 1):
+                a0, b0, a1, b1 = self.grid.row_ranges(ci, ti.Vector([dx, dy, -lower[2], upper[2]]))
+                for q in range(a0, b0):
+                    self.examine(xi, i, q, ci, False, True)
+                for q in range(a1, b1):
+                    self.examine(xi, i, q, ci, False, True)
 
     # ---- resolution ----
     @ti.func

@@ -66,6 +66,48 @@ def test_grid_detection_matches_brute_force(arch, periodic, poly):
     assert sim._contacts.n_active[None] == np.count_nonzero(sim._contacts.active.to_numpy())
 
 
+@pytest.mark.parametrize("periodic,poly", [(True, 0.0), ((True, False, True), 0.6)])
+def test_walks_around_touched_spheres_match_brute_force(arch, precision, periodic, poly):
+    """The walk around a touched sphere (Contacts.examine_around, which skips the cells
+    across faces farther than r_i + r_max + M, M the farthest move since the grid was
+    built) finds every pair brute force finds: overlaps from a long free flight, then
+    every sphere moved by M after binning (all alike, so that many pairs reach across
+    a face only by that move), and every sphere touched (each pair is then examined
+    once, from its lower id)."""
+    import taichi as ti
+    from taichi_spheres.params import MOVED, REMAINING
+
+    scene = _overlapping_scene(3000, periodic, seed=4, poly=poly)
+    sim = ts.Simulation(scene, arch=arch, precision=precision)
+    h = (60 if poly else 20) * sim.max_step()
+    sim._params.h[None] = h
+    sim._motion.drift()
+    sim._grid.build()
+    moved = 0.9 * sim.geometry.slack
+    x = sim._state.positions() + moved * np.array([0.6, -0.48, 0.64])
+    sim._state.x.from_numpy(x.astype(sim._state.x.to_numpy().dtype))
+    c = sim._contacts
+
+    @ti.kernel
+    def walk_around_all() -> ti.i32:
+        c.reset_detection_state()
+        c.params.vals[MOVED] = ti.cast(moved, c.real)
+        for i in range(c.n):
+            c.grid.refresh(i)
+            c.mark_touched(i)
+        c.detect_around_touched(False)
+        c.clear_marks(False)
+        return c.params.count[REMAINING]
+
+    found = walk_around_all()
+    st = sim.state()
+    ref = brute_force_overlaps(st, scene.box_lo, scene.box_hi, scene.periodic,
+                               c.approach_eps, h)
+    assert len(ref) > 10, "the set-up must produce overlaps to compare"
+    assert found == len(ref)
+    assert c.active.to_numpy().sum() == len(ref)
+
+
 @pytest.mark.parametrize("dims,periodic", [
     ((4, 4, 4), (True, True, True)),
     ((5, 3, 7), (True, True, True)),      # odd periodic counts: a third colour
