@@ -85,6 +85,11 @@ NEAR_SAFETY = 0.99
 #: (and makes new lists).
 NEAR_FAST_LIMIT = 8
 
+#: A walk around one sphere (examine_around) skips the neighbour cells it cannot reach;
+#: False walks all 27 (the same pairs; for comparing the two:
+#: ``python tools/ab_step.py contacts.PRUNE_WALKS=False``).
+PRUNE_WALKS = True
+
 
 def near_allowance(geom, r_max):
     """(reach, allowance) of near lists on grid ``geom`` with largest radius r_max [m]:
@@ -669,12 +674,16 @@ class Contacts:
         the cells among its 27 that can hold a sphere overlapping it: a neighbour across
         a face only if i is within r_i + r_max + M of that face, M = vals[MOVED] (no
         sphere moved farther since the grid was built; plus a round-off margin): the
-        same pairs as all 27 cells, with fewer rows and cells visited."""
+        same pairs as all 27 cells (PRUNE_WALKS = False), with fewer rows and cells
+        visited."""
         ci = self.grid.coords(self.grid.cell_of[i])
         xi = self.grid.xs[p]
-        reach = self.state.rad(i) + ti.cast(ti.static(self.state.r_max + self.walk_margin), self.real) + \
-            self.params.vals[MOVED]
-        lower, upper = self.grid.sides_within(ci, xi, reach)
+        lower = ti.Vector([1, 1, 1])
+        upper = ti.Vector([1, 1, 1])
+        if ti.static(PRUNE_WALKS):
+            reach = self.state.rad(i) + self.params.vals[MOVED] + \
+                ti.cast(ti.static(self.state.r_max + self.walk_margin), self.real)
+            lower, upper = self.grid.sides_within(ci, xi, reach)
         for dx in range(-lower[0], upper[0] + 1):
             for dy in range(-lower[1], upper[1] + 1):
                 a0, b0, a1, b1 = self.grid.row_ranges(ci, ti.Vector([dx, dy, -lower[2], upper[2]]))

@@ -66,17 +66,20 @@ def test_grid_detection_matches_brute_force(arch, periodic, poly):
     assert sim._contacts.n_active[None] == np.count_nonzero(sim._contacts.active.to_numpy())
 
 
+@pytest.mark.parametrize("prune", [True, False])
 @pytest.mark.parametrize("periodic,poly", [(True, 0.0), ((True, False, True), 0.6)])
-def test_walks_around_touched_spheres_match_brute_force(arch, precision, periodic, poly):
+def test_walks_around_touched_spheres_match_brute_force(arch, precision, periodic, poly, prune,
+                                                       monkeypatch):
     """The walk around a touched sphere (Contacts.examine_around, which skips the cells
     across faces farther than r_i + r_max + M, M the farthest move since the grid was
-    built) finds every pair brute force finds: overlaps from a long free flight, then
+    built; with PRUNE_WALKS = False it walks all 27) finds every pair brute force finds: overlaps from a long free flight, then
     every sphere moved by M after binning (all alike, so that many pairs reach across
     a face only by that move), and every sphere touched (each pair is then examined
     once, from its lower id)."""
     import taichi as ti
     from taichi_spheres.params import MOVED, REMAINING
 
+    monkeypatch.setattr(contacts, "PRUNE_WALKS", prune)
     scene = _overlapping_scene(3000, periodic, seed=4, poly=poly)
     sim = ts.Simulation(scene, arch=arch, precision=precision)
     h = (60 if poly else 20) * sim.max_step()
