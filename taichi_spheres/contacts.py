@@ -643,11 +643,10 @@ class Contacts:
     def detect_around_touched(self, serial: ti.template(), live=True):
         """Scan of the full stencil (up to 9 rows along z, examine_around) from spheres
         touched in this sweep; a pair of two touched spheres is examined once, from the
-        lower id. When many
-        spheres were touched (more than 1 in DENSE_TOUCHED) they are visited in cell
-        order, found by their ``marked`` flags: neighbouring visits then share cells
-        and cache lines, which in list order (random in space) cost a cache miss per
-        row; with few, the list is cheaper than reading every flag."""
+        lower id. When many spheres were touched (more than 1 in DENSE_TOUCHED) they are
+        visited in cell order, found by their ``marked`` flags: neighbouring visits then
+        share cells and cache lines, which in list order (random in space) cost a cache
+        miss per row; with few, the list is cheaper than reading every flag."""
         n_t = 0
         if live:
             n_t = self.n_touched[None]

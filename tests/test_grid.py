@@ -72,10 +72,11 @@ def test_walks_around_touched_spheres_match_brute_force(arch, precision, periodi
                                                        monkeypatch):
     """The walk around a touched sphere (Contacts.examine_around, which skips the cells
     across faces farther than r_i + r_max + M, M the farthest move since the grid was
-    built; with PRUNE_WALKS = False it walks all 27) finds every pair brute force finds: overlaps from a long free flight, then
-    every sphere moved by M after binning (all alike, so that many pairs reach across
-    a face only by that move), and every sphere touched (each pair is then examined
-    once, from its lower id)."""
+    built; with PRUNE_WALKS = False it walks all 27) finds every pair brute force
+    finds: overlaps from a long free flight, then every sphere moved by M after
+    binning (all alike, so that many pairs reach across a face only by that move), and
+    every sphere touched (each pair is then examined once, from its lower id). Leaving
+    M out of the reach fails this test."""
     import taichi as ti
     from taichi_spheres.params import MOVED, REMAINING
 
