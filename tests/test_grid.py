@@ -66,8 +66,8 @@ def test_grid_detection_matches_brute_force(arch, periodic, poly):
     assert sim._contacts.n_active[None] == np.count_nonzero(sim._contacts.active.to_numpy())
 
 
-@pytest.mark.parametrize("prune", [True, False])
-@pytest.mark.parametrize("periodic,poly", [(True, 0.0), ((True, False, True), 0.6)])
+@pytest.mark.parametrize("periodic,poly,prune", [(True, 0.0, True), ((True, False, True), 0.6, True),
+                                                 (True, 0.0, False)])
 def test_walks_around_touched_spheres_match_brute_force(arch, precision, periodic, poly, prune,
                                                        monkeypatch):
     """The walk around a touched sphere (Contacts.examine_around, which skips the cells
