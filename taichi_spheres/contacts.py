@@ -682,7 +682,7 @@ class Contacts:
         if ti.static(PRUNE_WALKS):
             reach = self.state.rad(i) + self.params.vals[MOVED] + \
                 ti.cast(ti.static(self.state.r_max + self.walk_margin), self.real)
-            lower, upper = self.grid.sides_within(ci, xi, reach)
+            lower, upper = self.grid.sides_within(self.min_image(xi - self.grid.corner(ci)), reach)
         for dx in range(-lower[0], upper[0] + 1):
             for dy in range(-lower[1], upper[1] + 1):
                 a0, b0, a1, b1 = self.grid.row_ranges(ci, ti.Vector([dx, dy, -lower[2], upper[2]]))

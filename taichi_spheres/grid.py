@@ -261,21 +261,20 @@ class Grid:
         return a0, b0, a1, b1
 
     @ti.func
-    def sides_within(self, c, x, reach):
-        """Which neighbours across the faces of cell c (vec3) lie within ``reach`` [m]
-        of the point x [m] (minimum image on periodic axes): (lower, upper), vec3 i32
-        of 0/1 per axis. A point farther than reach from a face is at least that far
-        from everything a sphere binned beyond it can reach after it moved."""
-        f = x - (self.lo[None] + c * ti.Vector(ti.static(list(self.geom.cell)), dt=self.real))
+    def corner(self, c):
+        """Lower corner of cell c (vec3 i32) [m]."""
+        return self.lo[None] + c * ti.Vector(ti.static(list(self.geom.cell)), dt=self.real)
+
+    @ti.func
+    def sides_within(self, f, reach):
+        """For a point at offset f [m] from the lower corner of its cell (minimum image:
+        see Contacts.min_image), which neighbours across the cell's faces lie within
+        ``reach`` [m]: (lower, upper), vec3 i32 of 0/1 per axis. A point farther than
+        reach from a face is at least that far from everything a sphere binned beyond
+        it can reach after it moved."""
         lower = ti.Vector([0, 0, 0])
         upper = ti.Vector([0, 0, 0])
         for a in ti.static(range(3)):
-            if ti.static(self.geom.periodic[a]):
-                size = ti.cast(ti.static(self.geom.cell[a] * self.geom.dims[a]), self.real)
-                if f[a] > 0.5 * size:
-                    f[a] -= size
-                elif f[a] < -0.5 * size:
-                    f[a] += size
             if f[a] < reach:
                 lower[a] = 1
             if f[a] > ti.cast(ti.static(self.geom.cell[a]), self.real) - reach:
