@@ -356,7 +356,8 @@ class Grid:
     @ti.func
     def _build_body(self):
         """Counting sort of spheres into cells: count, scan, scatter, sort each cell by id,
-        then copy the positions into that order (xs) and record each sphere's slot.
+        then copy the positions into that order (xs) and record each sphere's slot (a
+        serial scatter, in id order, leaves each cell sorted and does the copy itself).
 
         Also resets ``state.moved`` (distance moved since this build) to 0.
         """
@@ -378,22 +379,26 @@ class Grid:
         for i in range(self.n):
             slot = ti.atomic_add(self.cursor[self.cell_of[i]], 1)
             self.order[slot] = i
-        # atomics scatter in a thread-dependent order: sort each cell by sphere id
-        ti.loop_config(serialize=ti.static(self.serial_light))
-        for c in range(self.m):
-            lo = self.start[c]
-            hi = self.start[c + 1]
-            for p in range(lo + 1, hi):
-                key = self.order[p]
-                q = p - 1
-                while q >= lo and self.order[q] > key:
-                    self.order[q + 1] = self.order[q]
-                    q -= 1
-                self.order[q + 1] = key
-            for p in range(lo, hi):
-                i = self.order[p]
-                self.slot[i] = p
-                self.xs[p] = self.state.x[i]
+            if ti.static(self.serial_light):
+                # a serial scatter fills each cell in id order: done in one pass
+                self.slot[i] = slot
+                self.xs[slot] = self.state.x[i]
+        if ti.static(not self.serial_light):
+            # atomics scatter in a thread-dependent order: sort each cell by sphere id
+            for c in range(self.m):
+                lo = self.start[c]
+                hi = self.start[c + 1]
+                for p in range(lo + 1, hi):
+                    key = self.order[p]
+                    q = p - 1
+                    while q >= lo and self.order[q] > key:
+                        self.order[q + 1] = self.order[q]
+                        q -= 1
+                    self.order[q + 1] = key
+                for p in range(lo, hi):
+                    i = self.order[p]
+                    self.slot[i] = p
+                    self.xs[p] = self.state.x[i]
 
     @ti.func
     def refresh(self, i):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import taichi_spheres as ts
-from taichi_spheres import contacts
+from taichi_spheres import contacts, simulation
 from taichi_spheres.builders import gas
 from taichi_spheres.grid import BLOCK_PAIRS, GridGeometry
 
@@ -180,8 +180,15 @@ def test_compiled_colour_loops_touch_each_sphere_once(arch, periodic):
     assert total.min() >= 1
 
 
-def test_grid_order_is_sorted_and_complete(arch):
+@pytest.mark.parametrize("parallel", [False, True])
+def test_grid_order_is_sorted_and_complete(arch, parallel, monkeypatch):
+    """Both ways of building (on the CPU below 200,000 spheres a serial scatter in id
+    order that also copies the positions; else a parallel scatter, a sort of each cell
+    and a copy) give cells sorted by id, each sphere's slot, and its position in xs."""
+    if parallel:
+        monkeypatch.setattr(simulation, "_SERIAL_LIGHT_BELOW", 0)
     sim = ts.Simulation(gas(500, periodic=False, gravity=(0, 0, 0)), arch=arch)
+    assert sim._grid.serial_light == (sim.runtime.is_cpu and not parallel)
     sim._grid.build()
     start = sim._grid.start.to_numpy()
     order = sim._grid.order.to_numpy()
@@ -191,6 +198,8 @@ def test_grid_order_is_sorted_and_complete(arch):
         ids = order[start[c]:start[c + 1]]
         assert np.all(np.diff(ids) > 0), "ids inside a cell must be sorted"
         assert np.all(cell_of[ids] == c)
+    np.testing.assert_array_equal(sim._grid.slot.to_numpy()[order], np.arange(sim.n))
+    np.testing.assert_array_equal(sim._grid.xs.to_numpy(), sim._state.x.to_numpy()[order])
 
 
 def test_scan_over_many_blocks(arch):
