@@ -31,6 +31,10 @@ DEFAULT_SIZE = (640, 480)
 #: a run lasts minutes of stepping: ~600 steps of a million spheres, the length of a
 #: 5 s default run of the bench's gas, on 2 cores. GPUs get the same choice, unmeasured.
 AUTO_FAST_BELOW = 500_000
+#: runtime.ARCHS and runtime.COMPILE_MODES, spelled out so that parsing the command line
+#: does not import Taichi (tests/test_cli.py checks that they agree).
+ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
+COMPILE_CHOICES = ("auto", "fast", "optimized")
 
 
 def _size(text):
@@ -67,7 +71,7 @@ def build_parser():
     run.add_argument("scene", help="scene file (TOML)")
     run.add_argument("-o", "--output", default=None,
                      help="output video path (default: out/<scene name>.mp4)")
-    run.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
+    run.add_argument("--arch", default="cpu", choices=ARCHS)
     run.add_argument("--precision", default=None, choices=["f32", "f64"],
                      help="default: the scene's, else f64 on cpu/cuda, f32 on vulkan/metal")
     run.add_argument("--duration", type=_positive(float), default=None,
@@ -88,7 +92,7 @@ def build_parser():
     run.add_argument("--fused", action="store_true",
                      help="run each step as one fused kernel (CPU, below 3,000 spheres): "
                           "faster steps after a one-off compile of 10-60 s; same results")
-    run.add_argument("--compile", default="auto", choices=["auto", "fast", "optimized"],
+    run.add_argument("--compile", default="auto", choices=COMPILE_CHOICES,
                      help="how Taichi compiles the kernels: fast (~3x shorter compile, steps "
                           "~8%% slower, same results) or optimized; auto: "
                           f"TAICHI_SPHERES_COMPILE if set, else fast below {AUTO_FAST_BELOW:,} "
@@ -96,7 +100,7 @@ def build_parser():
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     info = sub.add_parser("info", help="validate a scene and show what it compiles in")
     info.add_argument("scene")
-    info.add_argument("--arch", default="cpu", choices=["cpu", "gpu", "cuda", "vulkan", "metal"])
+    info.add_argument("--arch", default="cpu", choices=ARCHS)
     return p
 
 

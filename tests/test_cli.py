@@ -211,3 +211,11 @@ def test_info_lists_compiled_features(tmp_path):
     assert "spheres: 4096" in r.stdout
     assert "gravity: off (compiled out)" in r.stdout
     assert "MiB" in r.stdout
+
+
+def test_cli_choices_match_the_runtime():
+    """The CLI spells out the arches and compile modes (parsing must not import Taichi):
+    they are the runtime's, plus "auto"."""
+    from taichi_spheres import cli, runtime
+    assert cli.ARCHS == runtime.ARCHS
+    assert set(cli.COMPILE_CHOICES) == set(runtime.COMPILE_MODES) | {"auto"}
