@@ -30,7 +30,7 @@ spare reach since (they are scanned around in the grid), until too many have.
 import numpy as np
 import taichi as ti
 
-from .grid import ALL_ROWS, BLOCK_PAIRS, FORWARD_ROWS, Grid
+from .grid import BLOCK_PAIRS, FORWARD_ROWS, Grid
 from .params import (E_PAIRS, E_REST, MOVED, OPEN_OVERLAP, PAIRS, REMAINING, RESTED,
                      SEP_OVERLAP, SUPPORTED, VIRIAL, VMAX2, StepParams)
 from .state import Features, SphereState
@@ -160,8 +160,6 @@ class Contacts:
         # compile time)
         self.fwd_rows = ti.Vector.field(4, ti.i32, shape=len(FORWARD_ROWS))
         self.fwd_rows.from_numpy(np.array(FORWARD_ROWS, dtype=np.int32))
-        self.all_rows = ti.Vector.field(4, ti.i32, shape=len(ALL_ROWS))
-        self.all_rows.from_numpy(np.array(ALL_ROWS, dtype=np.int32))
         self.block = ti.Vector.field(3, ti.i32, shape=(len(BLOCK_PAIRS), 2))
         self.block.from_numpy(np.array(BLOCK_PAIRS, dtype=np.int32))
         self.colours = grid.geom.colours

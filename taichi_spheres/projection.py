@@ -24,6 +24,7 @@ tests), and so are the pushed-pair counts and the largest overlap, which is kept
 sphere (``rmax``) and reduced over all spheres once at the end.
 """
 
+import numpy as np
 import taichi as ti
 
 from .contacts import Contacts
@@ -57,7 +58,7 @@ class Projection:
                  features: Features, serial: bool, tolerance: float):
         self.state = state
         self.grid = grid
-        self.contacts = contacts    # its minimum-image separation and stencil table
+        self.contacts = contacts    # its minimum-image separation
         self.motion = motion
         self.f = features
         self.real = state.real
@@ -76,6 +77,10 @@ class Projection:
         self.worst = ti.field(self.real, shape=())
         self.pushed = ti.field(ti.i32, shape=())
         self.stamp.fill(-1)
+        # the 27-cell stencil as a table walked by a runtime loop (unrolled, it would
+        # multiply compile time; contacts' walks skip the cells they cannot reach)
+        self.all_rows = ti.Vector.field(4, ti.i32, shape=len(ALL_ROWS))
+        self.all_rows.from_numpy(np.array(ALL_ROWS, dtype=np.int32))
 
         @ti.kernel
         def project_all():
@@ -153,7 +158,7 @@ class Projection:
         ci = self.grid.coords(self.grid.cell_of[i])
         it = self.iteration[None]
         for k in range(ti.static(len(ALL_ROWS))):
-            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.contacts.all_rows[k])
+            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
             for q in range(a0, b0):
                 self.list_once(self.grid.order[q], it)
             for q in range(a1, b1):
@@ -177,7 +182,7 @@ class Projection:
         if ti.static(not self.f.equal_masses):
             wi_num = self.state.inv_mass_of(i)
         for k in range(ti.static(len(ALL_ROWS))):
-            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.contacts.all_rows[k])
+            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
             for q in range(a0, b0):
                 dx, rel = self.pair_push(xi, i, q, wi_num, tol)
                 acc += dx
