@@ -58,3 +58,14 @@ def test_rss_and_exponent():
         assert bench.rss_bytes() > 0
     ns = [1e3, 1e4, 1e5]
     assert bench.fit_exponent(ns, [2.0 * n for n in ns]) == pytest.approx(1.0)
+
+
+def test_steal_share():
+    """Stolen CPU share from two /proc/stat readings; None when a reading is missing or
+    no time passed."""
+    assert bench.steal_share((10, 1000), (15, 1100)) == pytest.approx(0.05)
+    assert bench.steal_share(None, (15, 1100)) is None
+    assert bench.steal_share((10, 1000), (10, 1000)) is None
+    now = bench.cpu_jiffies()
+    if os.path.exists("/proc/stat"):
+        assert now is not None and 0 <= now[0] <= now[1]

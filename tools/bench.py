@@ -83,6 +83,27 @@ def build(make_sim, warm_steps=3):
                      fields=sim.field_bytes())
 
 
+# ---- other guests on the machine ----
+def cpu_jiffies():
+    """(steal, total) CPU time of the whole machine since boot [jiffies], from the
+    ``cpu`` line of /proc/stat (None without it). Steal is time the hypervisor gave to
+    other guests while this one had work to run."""
+    try:
+        with open("/proc/stat") as fh:
+            fields = [int(v) for v in fh.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    return (fields[7], sum(fields[:8])) if len(fields) >= 8 else None
+
+
+def steal_share(before, after):
+    """Share of the machine's CPU time stolen between two cpu_jiffies() readings (None
+    when either is missing or no time passed)."""
+    if before is None or after is None or after[1] <= before[1]:
+        return None
+    return (after[0] - before[0]) / (after[1] - before[1])
+
+
 # ---- stage timing ----
 def _timed(times, stage, fn, *args):
     """Run fn(*args), ti.sync(), add the wall seconds to times[stage]; return its result."""
@@ -346,7 +367,9 @@ def run_rows(args) -> list:
     for precision in args.precisions:
         for n in args.sizes:
             scene = gas(n, packing=0.3, periodic=True, seed=0)
+            before = cpu_jiffies()
             row = measure(scene, args.arch, precision, args.seconds, render=render)
+            row["steal"] = steal_share(before, cpu_jiffies())
             if row.get("render_error"):
                 print(f"render skipped: {row['render_error']}", flush=True)
                 render = False
@@ -357,7 +380,7 @@ def run_rows(args) -> list:
 
 def main(argv=None):
     args = parse_args(argv)
-    load_start = os.getloadavg()[0]
+    load_start, jiffies_start = os.getloadavg()[0], cpu_jiffies()
     runtime = ts.Simulation(gas(8, packing=0.01), arch=args.arch,
                             precision=args.precisions[0]).runtime
     baseline = rss_bytes()
@@ -372,7 +395,8 @@ def main(argv=None):
             feats.append((label, res))
             print(bench_report.feature_line(label, res), flush=True)
     loads = (load_start, os.getloadavg()[0])
-    text = bench_report.markdown(args, runtime, baseline, rows, fits, feats, loads)
+    steal = steal_share(jiffies_start, cpu_jiffies())
+    text = bench_report.markdown(args, runtime, baseline, rows, fits, feats, loads, steal)
     print(text)
     if not args.no_write:
         os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)

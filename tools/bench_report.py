@@ -29,7 +29,8 @@ def row_line(r) -> str:
             f"sum {r['stage_sum_ms']:.3f} against a full step {r['same_ms']:.3f} on the same "
             f"states), full/bare {r['ratio']:.2f}, memory "
             f"{_per_sphere(r['rss_warm'], r['n'])} B/sphere RSS, "
-            f"{_per_sphere(r['fields'], r['n'])} B/sphere fields{render}")
+            f"{_per_sphere(r['fields'], r['n'])} B/sphere fields{render}, "
+            f"CPU stolen {_percent(r.get('steal'))}")
 
 
 def fit_line(precision, fit) -> str:
@@ -57,9 +58,15 @@ def _table(head, align, body) -> list:
         ["| " + " | ".join(cells) + " |" for cells in body]
 
 
-def header(args, runtime, loads) -> list:
+def _percent(share) -> str:
+    """A share as a percentage with one decimal ('n/a' for None)."""
+    return "n/a" if share is None else f"{100 * share:.1f} %"
+
+
+def header(args, runtime, loads, steal=None) -> list:
     """Title, provenance (date, command, hardware, versions, load) and the scene.
-    loads: 1-minute load averages at the start and the end of the run."""
+    loads: 1-minute load averages at the start and the end of the run; steal: share of
+    the CPU time the hypervisor gave to other guests during the run (None: unknown)."""
     hw = gpu_name() if runtime.actual == "cuda" else None
     hardware = f"{hw} (GPU)" if hw else f"{cpu_name()}, {os.cpu_count()} cores"
     cmd = " ".join(["python tools/bench.py"] + sys.argv[1:])
@@ -69,7 +76,9 @@ def header(args, runtime, loads) -> list:
         f"{runtime.arch} (Taichi {'.'.join(map(str, ti.__version__))}, {runtime.actual}, "
         f"{runtime.compile} compile mode), "
         f"Python {platform.python_version()}. Load average (1 min, all processes on the "
-        f"machine) {loads[0]:.1f} at the start and {loads[1]:.1f} at the end of the run.", "",
+        f"machine) {loads[0]:.1f} at the start and {loads[1]:.1f} at the end of the run; "
+        f"CPU time stolen by the hypervisor for other guests (/proc/stat) during the run: "
+        f"{_percent(steal)}.", "",
         "Scene: N spheres of radius 0.5 m on a jittered lattice in a periodic cube at packing "
         "fraction 0.3, Gaussian velocities (rms 1 m/s per component), no gravity, e = 1; "
         "default step_fraction 0.1. A *sphere-step* is one sphere advanced by one adaptive "
@@ -86,7 +95,7 @@ def throughput_table(rows) -> list:
              f"{r['sphere_steps']:.3g}", f"{r['collisions']:.3g}",
              f"{r['sim_per_wall']:.3g}", f"{r['step_ms']:.3f}", f"{r['bare_ms']:.3f}",
              f"{r['ratio']:.2f}", f"{r['sweeps']:.2f}", f"{100 * r['near_share']:.0f} %",
-             f"{r['compile_s']:.1f}"] for r in rows]
+             f"{r['compile_s']:.1f}", _percent(r.get("steal"))] for r in rows]
     return ["## Throughput", "",
             "*ms/step* and the rates: consecutive steps, as `advance` takes them. "
             "*Simulated s / wall s*: simulated time advanced per second of wall time (the "
@@ -97,11 +106,14 @@ def throughput_table(rows) -> list:
             "instead of scanning the grid (same pairs and bits; `Contacts.detect`, from "
             "3,000 spheres on). Rows marked *: the full step is the fused step (one kernel "
             "besides the counter read-back), the bare pass three launches, which favours "
-            "the full step by a few launch costs (~0.1 ms).", ""] + \
+            "the full step by a few launch costs (~0.1 ms). *CPU stolen*: share of the "
+            "machine's CPU time the hypervisor gave to other guests while the row ran "
+            "(/proc/stat; other guests can also slow a row through shared caches and "
+            "memory without stealing time).", ""] + \
         _table(["N", "precision", "sphere-steps/s", "collisions/s", "simulated s / wall s",
                 "ms/step", "bare pass ms", "full/bare", "sweeps/step", "near lists",
-                "compile+warm-up s"],
-               "|---:|:---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|", body) + [""]
+                "compile+warm-up s", "CPU stolen"],
+               "|---:|:---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|", body) + [""]
 
 
 def memory_table(rows, baseline) -> list:
@@ -212,9 +224,10 @@ def feature_table(args, feats) -> list:
                 "identical states"], "|:---|---:|---:|---:|:---:|---:|---:|:---:|", body) + [""]
 
 
-def markdown(args, runtime, baseline, rows, fits, feats, loads) -> str:
-    """The whole docs/bench.md (loads: 1-minute load averages at start and end)."""
-    lines = header(args, runtime, loads) + throughput_table(rows) + memory_table(rows, baseline) + \
+def markdown(args, runtime, baseline, rows, fits, feats, loads, steal=None) -> str:
+    """The whole docs/bench.md (loads: 1-minute load averages at start and end; steal:
+    share of CPU time stolen during the run)."""
+    lines = header(args, runtime, loads, steal) + throughput_table(rows) + memory_table(rows, baseline) + \
         stage_table(rows) + scaling_table(rows, fits)
     if feats:
         lines += feature_table(args, feats)
