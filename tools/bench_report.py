@@ -85,8 +85,9 @@ def header(args, runtime, loads, steal=None) -> list:
         "step. Each row runs 3 timed blocks of at least 10 steps and "
         f"{args.seconds / 3:.2g} s each and keeps the fastest (the least disturbed). The "
         "machine is a shared VM: its cores also run other people's processes, and its "
-        "speed drifts by up to ±25 % from minute to minute, so differences of that size "
-        "between rows or runs are noise.", ""]
+        "speed drifts by up to ±25 % from minute to minute and by up to a factor of two "
+        "from one day to another, so differences of that size between rows or runs are "
+        "noise.", ""]
 
 
 def throughput_table(rows) -> list:
