@@ -7,7 +7,7 @@ import numpy as np
 
 from .scene import Scene
 
-__all__ = ["gas"]
+__all__ = ["gas", "same_bits_scene"]
 
 
 def gas(n, packing=0.3, radius=0.5, periodic=True, gravity=(0.0, 0.0, 0.0), restitution=1.0,
@@ -43,3 +43,29 @@ def gas(n, packing=0.3, radius=0.5, periodic=True, gravity=(0.0, 0.0, 0.0), rest
                              periodic=(periodic,) * 3 if isinstance(periodic, bool) else periodic,
                              gravity=gravity, restitution=restitution,
                              wall_restitution=wall_restitution, name=f"gas{n}")
+
+
+def same_bits_scene(n=400):
+    """The reference scene of the same-bits promise (tests/test_same_bits.py,
+    tools/state_digest.py): n spheres of radii 0.035-0.05 m and masses 0.5-2 kg on a
+    jittered cubic lattice of spacing 0.125 m filling a cubic box (1 m for n <= 512),
+    periodic in x and y, floor and ceiling walls, gravity -9.81 m/s^2 along z,
+    restitution 0.8 (pairs) and 0.9 (walls), velocities uniform in [-2, 2] m/s.
+
+    Built from IEEE-exact arithmetic only (lattice sums and products, uniform draws:
+    no pow, exp or log, whose last bit may differ between C libraries), so that the
+    scene itself has the same bits on every machine."""
+    rng = np.random.default_rng(2024)
+    side = 1
+    while side ** 3 < n:
+        side += 1
+    spacing = 0.125
+    idx = np.stack(np.meshgrid(*(np.arange(side),) * 3, indexing="ij"), -1).reshape(-1, 3)[:n]
+    radius = 0.05 - 0.015 * rng.random(n)
+    jitter = (spacing - 2.0 * 0.05) * (rng.random((n, 3)) - 0.5)
+    x = (idx + 0.5) * spacing + jitter
+    v = 4.0 * rng.random((n, 3)) - 2.0
+    mass = 0.5 + 1.5 * rng.random(n)
+    return Scene.from_arrays(x, v, radius, mass=mass, box=((0.0,) * 3, (side * spacing,) * 3),
+                             periodic=(True, True, False), gravity=(0.0, 0.0, -9.81),
+                             restitution=0.8, wall_restitution=0.9, name="same_bits")

@@ -4,9 +4,11 @@ Energies in J, momentum in kg m/s; potential energy is -m g.x (zero at the origi
 """
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
-__all__ = ["kinetic_energy", "potential_energy", "momentum", "total_energy"]
+__all__ = ["kinetic_energy", "potential_energy", "momentum", "total_energy", "state_digest"]
 
 
 def kinetic_energy(state) -> float:
@@ -26,3 +28,16 @@ def total_energy(state, gravity) -> float:
 def momentum(state) -> np.ndarray:
     """sum_i m_i v_i, (3,) [kg m/s]."""
     return (state.mass[:, None] * state.v).sum(axis=0)
+
+
+def state_digest(state, precision) -> str:
+    """SHA-256 (hex, first 16 digits) of the bits of a State's positions and
+    velocities in the simulation's ``precision`` ('f32' or 'f64'): equal digests mean
+    bit-identical states (the float64 copies of f32 values are exact, so they are
+    rounded back losslessly)."""
+    dtype = np.float64 if precision == "f64" else np.float32
+    h = hashlib.sha256()
+    for a in (state.x, state.v):
+        h.update(np.ascontiguousarray(a, dtype=dtype).astype("<f8" if dtype is np.float64
+                                                           else "<f4").tobytes())
+    return h.hexdigest()[:16]

@@ -26,6 +26,14 @@ PRECISIONS = ("f32", "f64")
 #: else TAICHI_SPHERES_COMPILE.
 COMPILE_MODES = {"optimized": {}, "fast": {"advanced_optimization": False}}
 COMPILE_ENV = "TAICHI_SPHERES_COMPILE"
+#: Taichi's fast_math (its default is True) lets LLVM contract a*b+c into one fused
+#: multiply-add and reassociate floating point wherever the CPU has the instructions
+#: and its cost model likes it: which expressions it fuses differs between CPUs
+#: (AVX2/AVX-512 FMA, ARM), compile modes and loop shapes, so the same scene gave
+#: other bits on another CPU or in the other compile mode. Off, every operation
+#: rounds as written (IEEE 754), and the results depend only on the scene, precision
+#: and thread count (tests/test_same_bits.py). Cost at N = 1e5: docs/bench.md.
+FAST_MATH = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -92,7 +100,8 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
         raise ValueError("precision f64 is not available on Metal; use precision='f32'")
     fp = ti.f64 if want == "f64" else ti.f32
     kwargs = dict(arch=_taichi_arch(arch), default_fp=fp, default_ip=ti.i32,
-                  offline_cache=True, log_level=ti.WARN, random_seed=0)
+                  offline_cache=True, log_level=ti.WARN, random_seed=0,
+                  fast_math=FAST_MATH)
     kwargs.update(COMPILE_MODES[mode])
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads

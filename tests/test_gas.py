@@ -156,26 +156,30 @@ def test_stale_simulation_refuses_to_run(arch):
 
 def test_compile_modes_give_the_same_bits(arch):
     """runtime.COMPILE_MODES change how long kernels take to compile and run, never the
-    results: an inelastic walled gas under gravity (most features compiled in) ends in
-    the same bits in both modes."""
+    results: the same-bits reference scene (inelastic, walls, gravity, unequal radii
+    and masses; tests/test_same_bits.py) ends in the same bits in both modes, and on
+    the CPU in the stored ones."""
     from taichi_spheres import runtime
+    from taichi_spheres.builders import same_bits_scene
+    from test_same_bits import STORED
     if arch == "metal":
         pytest.skip("no f64 on Metal")
-    scene = gas(300, packing=0.2, periodic=(True, True, False), gravity=(0, 0, -1.0),
-                restitution=0.8, seed=5, polydispersity=0.3)
+    case = STORED["small"]
     out = {}
     try:
         for mode in ("fast", "optimized"):
             runtime.ensure(arch, "f64", compile=mode)
-            sim = ts.Simulation(scene, arch=arch)
+            sim = ts.Simulation(same_bits_scene(case["n"]), arch=arch)
             assert sim.runtime.compile == mode
-            sim.advance(1.0)
-            assert sim.stats["pair_collisions"] > 300
+            sim.advance(case["duration"])
+            assert sim.stats["pair_collisions"] > 1000
             out[mode] = sim.state()
     finally:
         runtime.ensure(arch, "f64", compile=runtime.compile_mode_from_env())
     np.testing.assert_array_equal(out["fast"].x, out["optimized"].x)
     np.testing.assert_array_equal(out["fast"].v, out["optimized"].v)
+    if arch == "cpu":
+        assert ts.observe.state_digest(out["optimized"], "f64") == case["digests"]["f64"]
 
 
 def test_compile_mode_choices(monkeypatch):

@@ -1,0 +1,77 @@
+"""Same bits on every CPU: stored digests of the reference scenes.
+
+``builders.same_bits_scene`` (inelastic pairs and walls, gravity, periodic sides,
+floor and ceiling, unequal radii and masses) is run for a fixed time and the bits of
+its final positions and velocities are hashed (``observe.state_digest``). The digests
+in ``tests/same_bits.json`` were computed by ``python tools/state_digest.py --write``;
+every CPU (any x86-64 model, with or without AVX-512 and FMA; ARM), both compile
+modes, the fused step and the per-colour parallel launches must reproduce them. A
+change of the physics changes them on purpose: store the new ones with that command
+and say why in the commit.
+
+What makes this hold is ``runtime.FAST_MATH = False``: with Taichi's default fast
+math, LLVM fuses multiply-adds where the CPU has FMA and as its cost model picks per
+kernel, so the "small" case gave another digest in each compile mode on an AVX-512
+CPU (f64: 8635d2a254a2d6bc fast, 47a4b6901caf68e8 optimized, against the stored
+8cc27c0e86a30ba3).
+"""
+import json
+import os
+
+import pytest
+
+import taichi_spheres as ts
+from taichi_spheres import contacts, runtime
+from taichi_spheres.builders import same_bits_scene
+
+with open(os.path.join(os.path.dirname(__file__), "same_bits.json")) as _f:
+    STORED = json.load(_f)
+
+
+def _digest(case, precision, arch="cpu", **kw):
+    """(digest, Simulation) of the reference scene of ``case`` after its run."""
+    sim = ts.Simulation(same_bits_scene(STORED[case]["n"]), arch=arch, precision=precision,
+                        **kw)
+    sim.advance(STORED[case]["duration"])
+    return ts.observe.state_digest(sim.state(), precision), sim
+
+
+def _cpu_only(arch):
+    if arch != "cpu":
+        pytest.skip("the stored digests are the CPU's (GPUs: tests/test_gas.py compares "
+                    "their runs with each other)")
+
+
+@pytest.mark.parametrize("case", ["small", "large"])
+def test_reference_scenes_give_the_stored_digests(arch, precision, case):
+    _cpu_only(arch)
+    digest, sim = _digest(case, precision)
+    assert sim.stats["pair_collisions"] > 1000 and sim.stats["wall_collisions"] > 100
+    assert digest == STORED[case]["digests"][precision]
+
+
+def test_fused_step_gives_the_stored_digest(arch):
+    _cpu_only(arch)
+    digest, sim = _digest("small", "f64", fused=True)
+    assert sim.fused
+    assert digest == STORED["small"]["digests"]["f64"]
+
+
+def test_parallel_colour_launches_give_the_stored_digest(arch, monkeypatch):
+    """From 3,000 spheres on, the CPU may launch a sweep per colour in parallel (as a GPU
+    always does); forced onto those launches, the large case keeps its digest."""
+    _cpu_only(arch)
+    monkeypatch.setattr(contacts, "FEW_PAIRS", -1)
+    monkeypatch.setattr(contacts, "SERIAL_RESOLVE_PAIRS", -1)
+    digest, sim = _digest("large", "f64")
+    launches = []
+    per_colour = sim._contacts.resolve_colour_parallel
+    sim._contacts.resolve_colour_parallel = lambda k: (launches.append(k), per_colour(k))
+    sim.advance(sim.max_step())
+    assert launches, "the sweeps did not launch per colour"
+    assert digest == STORED["large"]["digests"]["f64"]
+
+
+def test_fast_math_stays_off():
+    """Taichi's fast math makes the bits depend on the CPU model and compile mode."""
+    assert runtime.FAST_MATH is False
