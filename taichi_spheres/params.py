@@ -11,8 +11,8 @@ from taichi.lang import impl
 
 # indices into StepParams.count (i32, per step)
 (REMAINING, PAIRS, WALLS, WALL_RESTS, MULTI, RESTED, SUPPORTED, FLOOR, PROJECTED,
- PROJECTED_PAIRS) = range(10)
-N_COUNTS = 10
+ PROJECTED_PAIRS, WALL_RESTED) = range(11)
+N_COUNTS = 11
 # indices into StepParams.vals (real, per step)
 SEP_OVERLAP, OPEN_OVERLAP, VMAX2, MOVED, E_PAIRS, E_WALLS, E_REST, VIRIAL, PROJ_WORST = range(9)
 N_VALS = 9
@@ -45,7 +45,8 @@ class StepParams:
         collisions made perfectly inelastic by the rest rule, of which against a
         supported sphere, spheres supported by the floor, in the current step; of a
         fused step (fused.py) also: 1 if it ran the overlap projection, and the pairs
-        the projection pushed.
+        the projection pushed; wall impacts made perfectly inelastic by the rest
+        rule (floor-like walls only).
     vals: N_VALS real slots — max relative overlap of separating pairs, of
         approaching pairs in the last detection, max |v|^2, max distance moved;
         kinetic energy removed by pair restitution, by wall restitution, by the

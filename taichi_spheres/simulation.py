@@ -28,7 +28,8 @@ from .grid import Grid, GridGeometry
 from . import observe
 from .params import (E_PAIRS, E_REST, E_WALLS, FLOOR, MULTI, OPEN_OVERLAP, PAIRS, PROJ_WORST,
                      PROJECTED, PROJECTED_PAIRS, REMAINING,
-                     RESTED, SEP_OVERLAP, SUPPORTED, VIRIAL, VMAX2, WALL_RESTS, WALLS,
+                     RESTED, SEP_OVERLAP, SUPPORTED, VIRIAL, VMAX2, WALL_RESTED, WALL_RESTS,
+                     WALLS,
                      StepParams)
 from .scene import Scene
 from .state import Features, SphereState, State
@@ -174,6 +175,7 @@ class Simulation:
         self._totals = dict(steps=0, pair_collisions=0, wall_collisions=0, wall_rests=0,
                             sweeps=0, unresolved=0, max_overlap=0.0, sweep_limit_hits=0,
                             grid_rebuilds=0, multi_collision_spheres=0, rest_collisions=0,
+                            wall_rest_collisions=0,
                             supported_collisions=0, energy_pair_restitution=0.0,
                             energy_wall_restitution=0.0, energy_rest_rule=0.0, virial=0.0,
                             projected_steps=0, projected_pairs=0, near_list_detections=0)
@@ -224,8 +226,10 @@ class Simulation:
         multi_collision_spheres (spheres with more than one pair or wall collision in
         a step, summed over steps: collisions of one sphere within a step are
         resolved one after another, a source of error), rest_collisions (pair
-        collisions made perfectly inelastic by the rest rule), supported_collisions
-        (of which against a supported sphere); energy_pair_restitution,
+        collisions made perfectly inelastic by the rest rule or the collapse rule),
+        supported_collisions (of which against a supported sphere),
+        wall_rest_collisions (wall impacts made perfectly inelastic by the rest rule:
+        only on floor-like walls, where gravity presses the sphere into the wall); energy_pair_restitution,
         energy_wall_restitution, energy_rest_rule (kinetic energy removed by each
         cause [J]; see :meth:`energy_budget`); virial (sum over pair collisions of
         r_ij . dp_i at contact [J s]: the collisional pressure over a time T in volume V
@@ -387,6 +391,7 @@ class Simulation:
         t["wall_rests"] += int(counts[WALL_RESTS])
         t["multi_collision_spheres"] += int(counts[MULTI])
         t["rest_collisions"] += int(counts[RESTED])
+        t["wall_rest_collisions"] += int(counts[WALL_RESTED])
         t["supported_collisions"] += int(counts[SUPPORTED])
         t["energy_pair_restitution"] += float(v[E_PAIRS])
         t["energy_wall_restitution"] += float(v[E_WALLS])

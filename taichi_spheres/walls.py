@@ -23,7 +23,8 @@ kinetic energy, counted in ``stats['wall_rests']``.
 
 import taichi as ti
 
-from .params import E_REST, E_WALLS, FLOOR, MULTI, VMAX2, WALLS, WALL_RESTS, StepParams
+from .params import (E_REST, E_WALLS, FLOOR, MULTI, VMAX2, WALL_RESTED, WALLS, WALL_RESTS,
+                     StepParams)
 from .state import Features, SphereState
 
 MAX_WALL_BOUNCES = 8
@@ -124,8 +125,11 @@ class Motion:
                             d = hi_c - x[a]
                         if side == 0:
                             break
+                        # floor-like: gravity presses the sphere into this wall
+                        floor = False
                         if ti.static(self.f.gravity_axes[a]):
                             if side * g_a > 0:
+                                floor = True
                                 on_floor = True
                         w = v[a] * side * -1
                         acc = g_a * side * -1
@@ -133,7 +137,7 @@ class Motion:
                         bounced = False
                         if s >= 0 and s <= 2 * h and bounce < MAX_WALL_BOUNCES:
                             wc = w - acc * s
-                            wn = self.rebound(i, -wc, e_w)
+                            wn = self.rebound(i, -wc, e_w, floor)
                             dn = wn * s + ti.cast(0.5, self.real) * acc * s * s
                             if side < 0:
                                 x[a] = lo_c + dn
@@ -154,7 +158,7 @@ class Motion:
                                 # mirror into the box and reflect (energy exact for e=1)
                                 wn = w
                                 if w < 0:
-                                    wn = self.rebound(i, -w, e_w)
+                                    wn = self.rebound(i, -w, e_w, floor)
                                 if side < 0:
                                     x[a] = lo_c - d
                                 else:
@@ -170,7 +174,7 @@ class Motion:
                                 w2 = ti.max(w * w - 2 * acc * d, 0)
                                 wn = ti.sqrt(w2)
                                 if w < 0:
-                                    wn = self.rebound(i, wn, e_w)
+                                    wn = self.rebound(i, wn, e_w, floor)
                                 if side < 0:
                                     x[a] = lo_c
                                 else:
@@ -200,16 +204,20 @@ class Motion:
         self.state.v[i] = v
 
     @ti.func
-    def rebound(self, i, speed, e_w):
+    def rebound(self, i, speed, e_w, floor):
         """Outward normal speed after sphere i hits a wall at normal speed ``speed`` >= 0
-        [m/s]: e_w x speed, or 0 below the rest speed (rest rule). Books the kinetic
-        energy removed (vals E_WALLS or E_REST)."""
+        [m/s]: e_w x speed, or 0 below the rest speed (rest rule) on a floor-like wall
+        (``floor``: gravity presses the sphere into it, g . n_wall > 0 for the wall's
+        outward normal; side walls and ceilings keep their restitution). Books the
+        kinetic energy removed (vals E_WALLS or E_REST) and counts a rest-rule firing
+        (count WALL_RESTED)."""
         out = e_w * speed
         rested = False
-        if ti.static(self.f.rest_rule):
-            if speed < self.params.rest_speed[None]:
+        if ti.static(self.f.rest_rule and self.f.gravity):
+            if floor and speed < self.params.rest_speed[None]:
                 out = ti.cast(0, self.real)
                 rested = True
+                ti.atomic_add(self.params.count[WALL_RESTED], 1)
                 ti.atomic_add(self.params.vals[E_REST], ti.cast(0.5, self.real) * self.state.mass_of(i) * speed * speed)
         if ti.static(not self.f.elastic_walls):
             if not rested:

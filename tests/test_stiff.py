@@ -419,3 +419,31 @@ def test_fused_step_hands_over_to_kernels_after_a_rebuild(arch):
     stats = _fused_matches_kernel_by_kernel(arch, scene, lambda sim: 30 * sim.max_step(),
                                             step_fraction=1.0)
     assert stats["grid_rebuilds"] > 0
+
+
+def test_slow_side_wall_and_ceiling_bounces_keep_their_restitution(arch, precision):
+    """Under gravity the rest rule makes only floor-like wall impacts (gravity pressing
+    the sphere into the wall) perfectly inelastic: a sphere meeting a side wall at 0.12
+    m/s and one reaching the ceiling at 0.05 m/s, both below the automatic rest speed,
+    leave with e_w times their speed; a slow floor impact rests, and every firing of
+    the rule is counted (stats['wall_rest_collisions'])."""
+    r, e_w, g = 0.05, 0.8, 9.81
+    gap = 1e-3
+    v_ceiling = 0.05                      # normal speed at the ceiling
+    vz0 = np.sqrt(v_ceiling ** 2 + 2 * g * gap)
+    x = [[1 - r - gap, 0.5, 0.5], [0.5, 0.2, 1 - r - gap], [0.2, 0.8, r + 0.2 * gap]]
+    v = [[0.12, 0, 0], [0, 0, vz0], [0, 0, -0.05]]
+    scene = ts.Scene.from_arrays(x, v, r, gravity=(0, 0, -g), restitution=0.5,
+                                 wall_restitution=e_w)
+    sim = ts.Simulation(scene, arch=arch, precision=precision)
+    assert sim.rest_speed > 0.12          # all three impacts are slower than it
+    sim.advance(0.02)                     # every sphere hits its wall within 0.01 s
+    st = sim.state()
+    assert st.v[0, 0] == pytest.approx(-e_w * 0.12, rel=tol(precision, 1e3))
+    t_hit = (vz0 - v_ceiling) / g
+    assert st.v[1, 2] == pytest.approx(-e_w * v_ceiling - g * (0.02 - t_hit),
+                                       rel=tol(precision, 1e4))
+    assert st.x[2, 2] == pytest.approx(r, abs=tol(precision, 10))   # rests on the floor
+    assert sim.stats["wall_collisions"] >= 2
+    assert sim.stats["wall_rest_collisions"] >= 1
+    assert sim.stats["energy_rest_rule"] > 0
