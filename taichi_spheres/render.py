@@ -40,6 +40,12 @@ def speed_colours(v: np.ndarray, vmax: float) -> np.ndarray:
     return ((1 - t) * cold + t * hot).astype(np.float32)
 
 
+def rgba(rgb: np.ndarray) -> np.ndarray:
+    """(N, 3) RGB in [0, 1] -> (N, 4) float32 RGBA, opaque."""
+    rgb = np.asarray(rgb, dtype=np.float32)
+    return np.ascontiguousarray(np.concatenate([rgb, np.ones((len(rgb), 1), np.float32)], axis=1))
+
+
 class Renderer:
     """Offscreen GGUI renderer for one scene.
 
@@ -75,10 +81,12 @@ class Renderer:
         n = scene.n
         self.pos = ti.Vector.field(3, ti.f32, shape=n)
         self.rad = ti.field(ti.f32, shape=n)
-        self.col = ti.Vector.field(3, ti.f32, shape=n)
+        # RGBA: GGUI's staging copy fills a missing alpha with a literal 1.0, which is an
+        # f64 assigned into its f32 buffer when Taichi's default float is f64
+        self.col = ti.Vector.field(4, ti.f32, shape=n)
         self.rad.from_numpy(scene.radius.astype(np.float32))
         table = palette(np.zeros(n, dtype=np.int64)) if colour_table is None else colour_table
-        self.col.from_numpy(np.ascontiguousarray(table, dtype=np.float32))
+        self.col.from_numpy(rgba(table))
         self.edges = ti.Vector.field(3, ti.f32, shape=24)
         self.edges.from_numpy(_box_edges(scene.box_lo, scene.box_hi))
         lo, hi = scene.box_lo, scene.box_hi
@@ -100,7 +108,7 @@ class Renderer:
         if self.colours == "speed":
             if self._vmax is None:   # fixed scale from the first frame: colours comparable
                 self._vmax = float(np.linalg.norm(state.v, axis=1).max()) or 1.0
-            self.col.from_numpy(speed_colours(state.v, self._vmax))
+            self.col.from_numpy(rgba(speed_colours(state.v, self._vmax)))
         self.canvas.set_background_color(self.background)
         self.gscene.set_camera(self.camera)
         self.gscene.ambient_light((0.35, 0.35, 0.35))
