@@ -12,7 +12,9 @@ import math
 
 import numpy as np
 
-__all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE", "RESTITUTION_MODELS"]
+__all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE", "RESTITUTION_MODELS", "MIN_STEP_ULPS",
+           "OVERFLOW_HEADROOM", "largest_speed", "smallest_radius", "fall_speed",
+           "speed_problem", "radius_problem", "mass_problem", "gravity_problem"]
 
 #: Pair restitution models: "normal" (default) and "smid" (the seed's rule).
 RESTITUTION_MODELS = ("normal", "smid")
@@ -23,6 +25,18 @@ DEFAULT_DENSITY = 1000.0
 #: (distance == r_i + r_j, or centre +- radius == wall, up to decimal round-off)
 #: are accepted.
 TOUCH_TOLERANCE = 1e-10
+#: A step moves a sphere at most step_fraction x the smallest radius; that move must span
+#: at least this many units in the last place (ulps) of the largest coordinate in the box,
+#: in the simulation's precision. Below it positions cannot record the motion: each
+#: step's move would round by more than 1 / (2 x MIN_STEP_ULPS) = 6 %, and a radius
+#: under one ulp would not move at all (the run would never end).
+MIN_STEP_ULPS = 8
+#: Speeds are squared (kinetic energy, the step bound, the contact-time quadratics) and
+#: summed in pairs: a speed must stay below sqrt(largest float) / OVERFLOW_HEADROOM of the
+#: precision (f64: 8.4e152 m/s, f32: 1.2e18 m/s), a mass within its range / HEADROOM^2.
+OVERFLOW_HEADROOM = 16.0
+#: numpy dtype of each precision name.
+PRECISION_DTYPES = {"f32": np.float32, "f64": np.float64}
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -82,61 +96,20 @@ class Scene:
         (see the class docstring).
         Raises ValueError naming the argument or sphere index at fault.
         """
-        x = _array("x", x, ndim=2)
-        n = x.shape[0]
-        if x.shape[1:] != (3,):
-            raise ValueError(f"x must have shape (N, 3), got {x.shape}")
-        if n == 0:
-            raise ValueError("x: a scene needs at least one sphere")
-        v = _array("v", v, ndim=2)
-        if v.shape != (n, 3):
-            raise ValueError(f"v must have shape ({n}, 3) like x, got {v.shape}")
-        radius = _per_sphere("radius", radius, n)
-        _finite_rows("x", x)
-        _finite_rows("v", v)
-        _positive("radius", radius)
-        if mass is not None and density is not None:
-            raise ValueError("give either mass or density, not both")
-        if mass is not None:
-            mass = _per_sphere("mass", mass, n)
-            _positive("mass", mass)
-        else:
-            dens = _per_sphere("density", DEFAULT_DENSITY if density is None else density, n)
-            _positive("density", dens)
-            with np.errstate(over="ignore", under="ignore"):
-                mass = dens * (4.0 / 3.0) * math.pi * radius ** 3
-            _positive("mass (from density)", mass)
-            bad = np.flatnonzero(~np.isfinite(mass))
-            if bad.size:
-                raise ValueError(f"mass (from density) of sphere {bad[0]} is not finite "
-                                 f"(density {dens[bad[0]]}, radius {radius[bad[0]]})" + _more(bad))
-        try:
-            lo, hi = box
-        except (TypeError, ValueError):
-            raise ValueError("box must be ((xlo, ylo, zlo), (xhi, yhi, zhi))") from None
-        lo = _vector3("box lower corner", lo)
-        hi = _vector3("box upper corner", hi)
-        for a in range(3):
-            if not hi[a] > lo[a]:
-                raise ValueError(f"box: upper corner must exceed lower corner on axis {'xyz'[a]} "
-                                 f"({lo[a]} .. {hi[a]})")
-        with np.errstate(over="ignore"):
-            if not np.isfinite(hi - lo).all():
-                raise ValueError(f"box: size {(hi - lo).tolist()} is not finite")
+        x, v, radius = _spheres(x, v, radius)
+        lo, hi = _box(box)
         periodic = _periodic(periodic)
+        _raise_first([speed_problem("f64", v), radius_problem("f64", radius, lo, hi)])
+        mass = _masses(mass, density, radius)
+        _raise_first([mass_problem("f64", mass)])
         gravity = _vector3("gravity", gravity)
+        _raise_first([gravity_problem("f64", gravity, fall_speed(gravity, lo, hi))])
         restitution = _restitution("restitution", restitution)
         wall_restitution = _restitution("wall_restitution", wall_restitution)
         if restitution_model not in RESTITUTION_MODELS:
             raise ValueError(f"restitution_model must be one of {RESTITUTION_MODELS}, "
                              f"got {restitution_model!r}")
-        if rest_speed is not None:
-            try:
-                rest_speed = float(rest_speed)
-            except (TypeError, ValueError):
-                raise ValueError(f"rest_speed must be a number >= 0 or None, got {rest_speed!r}") from None
-            if not (math.isfinite(rest_speed) and rest_speed >= 0):
-                raise ValueError(f"rest_speed must be a finite number >= 0, got {rest_speed}")
+        rest_speed = _rest_speed(rest_speed)
         _inside_box(x, radius, lo, hi, periodic)
         _no_overlaps(x, radius, lo, hi, periodic)
         return cls(x=x, v=v, radius=radius, mass=mass, box_lo=lo, box_hi=hi,
@@ -155,6 +128,158 @@ class Scene:
             args.pop("mass")
         args.update(changes)
         return dataclasses.replace(Scene.from_arrays(**args), meta=dict(self.meta))
+
+
+def _spheres(x, v, radius):
+    """Checked (N, 3) positions [m], (N, 3) velocities [m/s] and (N,) radii [m]."""
+    x = _array("x", x, ndim=2)
+    n = x.shape[0]
+    if x.shape[1:] != (3,):
+        raise ValueError(f"x must have shape (N, 3), got {x.shape}")
+    if n == 0:
+        raise ValueError("x: a scene needs at least one sphere")
+    v = _array("v", v, ndim=2)
+    if v.shape != (n, 3):
+        raise ValueError(f"v must have shape ({n}, 3) like x, got {v.shape}")
+    radius = _per_sphere("radius", radius, n)
+    _finite_rows("x", x)
+    _finite_rows("v", v)
+    _positive("radius", radius)
+    return x, v, radius
+
+
+def _box(box):
+    """Checked lower and upper box corners [m] from ((xlo, ylo, zlo), (xhi, yhi, zhi))."""
+    try:
+        lo, hi = box
+    except (TypeError, ValueError):
+        raise ValueError("box must be ((xlo, ylo, zlo), (xhi, yhi, zhi))") from None
+    lo = _vector3("box lower corner", lo)
+    hi = _vector3("box upper corner", hi)
+    for a in range(3):
+        if not hi[a] > lo[a]:
+            raise ValueError(f"box: upper corner must exceed lower corner on axis {'xyz'[a]} "
+                             f"({lo[a]} .. {hi[a]})")
+    with np.errstate(over="ignore"):
+        if not np.isfinite(hi - lo).all():
+            raise ValueError(f"box: size {(hi - lo).tolist()} is not finite")
+    return lo, hi
+
+
+def _masses(mass, density, radius):
+    """(N,) masses [kg] from mass [kg] or density [kg/m^3] (default DEFAULT_DENSITY)."""
+    n = radius.shape[0]
+    if mass is not None and density is not None:
+        raise ValueError("give either mass or density, not both")
+    if mass is not None:
+        mass = _per_sphere("mass", mass, n)
+        _positive("mass", mass)
+        return mass
+    dens = _per_sphere("density", DEFAULT_DENSITY if density is None else density, n)
+    _positive("density", dens)
+    with np.errstate(over="ignore", under="ignore"):
+        mass = dens * (4.0 / 3.0) * math.pi * radius ** 3
+    _positive("mass (from density)", mass)
+    bad = np.flatnonzero(~np.isfinite(mass))
+    if bad.size:
+        raise ValueError(f"mass (from density) of sphere {bad[0]} is not finite "
+                         f"(density {dens[bad[0]]}, radius {radius[bad[0]]})" + _more(bad))
+    return mass
+
+
+def _rest_speed(rest_speed):
+    """None (automatic) or a finite rest speed >= 0 [m/s]."""
+    if rest_speed is None:
+        return None
+    try:
+        rest_speed = float(rest_speed)
+    except (TypeError, ValueError):
+        raise ValueError(f"rest_speed must be a number >= 0 or None, got {rest_speed!r}") from None
+    if not (math.isfinite(rest_speed) and rest_speed >= 0):
+        raise ValueError(f"rest_speed must be a finite number >= 0, got {rest_speed}")
+    return rest_speed
+
+
+def _raise_first(problems):
+    for problem in problems:
+        if problem:
+            raise ValueError(problem)
+
+
+# ------------------------------------------------------------- what a precision can hold
+
+def largest_speed(precision: str) -> float:
+    """The largest speed [m/s] a simulation in ``precision`` ("f32" | "f64") can hold:
+    sqrt(largest float) / OVERFLOW_HEADROOM."""
+    return math.sqrt(float(np.finfo(PRECISION_DTYPES[precision]).max)) / OVERFLOW_HEADROOM
+
+
+def smallest_radius(precision: str, lo, hi, step_fraction: float = 1.0) -> float:
+    """The smallest radius [m] a simulation in ``precision`` can move in the box [lo, hi]
+    [m]: a step's largest move, step_fraction x radius, spans MIN_STEP_ULPS units in the
+    last place of the largest coordinate."""
+    extent = float(np.max(np.abs(np.concatenate([np.ravel(lo), np.ravel(hi)]))))
+    dtype = PRECISION_DTYPES[precision]
+    ulp = float(np.spacing(dtype(extent))) if extent > 0 else float(np.finfo(dtype).tiny)
+    return MIN_STEP_ULPS * ulp / step_fraction
+
+
+def fall_speed(gravity, lo, hi) -> float:
+    """Speed [m/s] gravity [m/s^2] gives a sphere falling across the box [lo, hi] [m]
+    along every axis: sqrt(2 sum_a |g_a| (hi_a - lo_a))."""
+    with np.errstate(over="ignore"):
+        drop = float(np.sum(np.abs(gravity) * (np.asarray(hi) - np.asarray(lo))))
+        return math.sqrt(2.0 * drop) if math.isfinite(drop) else math.inf
+
+
+def speed_problem(precision: str, v) -> str | None:
+    """Why the fastest sphere of (N, 3) velocities v [m/s] overflows ``precision``, or None."""
+    speed = np.sqrt(np.sum(np.square(v / largest_speed(precision)), axis=1))
+    bad = np.flatnonzero(speed > 1.0)
+    if not bad.size:
+        return None
+    i = int(bad[np.argmax(speed[bad])])
+    return (f"speed of sphere {i} ({speed[i] * largest_speed(precision):.3g} m/s) overflows "
+            f"{precision}: its square must stay finite, at most "
+            f"{largest_speed(precision):.2g} m/s" + _more(bad))
+
+
+def radius_problem(precision: str, radius, lo, hi, step_fraction: float = 1.0) -> str | None:
+    """Why the smallest of the radii [m] is too small for ``precision`` in the box, or None."""
+    least = smallest_radius(precision, lo, hi, step_fraction)
+    bad = np.flatnonzero(radius < least)
+    if not bad.size:
+        return None
+    j = int(bad[np.argmin(radius[bad])])
+    return (f"radius of sphere {j} ({radius[j]:.3g} m) is below what {precision} can "
+            f"simulate in this box (coordinates up to {np.max(np.abs([lo, hi])):g} m): a "
+            f"step's move, step_fraction x radius, must span {MIN_STEP_ULPS} units in the "
+            f"last place; smallest radius {least:.2g} m at step_fraction {step_fraction:g}"
+            + _more(bad))
+
+
+def mass_problem(precision: str, mass) -> str | None:
+    """Why a mass [kg] underflows or overflows ``precision``, or None."""
+    info = np.finfo(PRECISION_DTYPES[precision])
+    low, high = float(info.tiny), float(info.max) / OVERFLOW_HEADROOM ** 2
+    bad = np.flatnonzero((mass < low) | (mass > high))
+    if not bad.size:
+        return None
+    i = int(bad[0])
+    return (f"mass of sphere {i} ({mass[i]:.3g} kg) is outside what {precision} can hold "
+            f"({low:.2g} .. {high:.2g} kg)" + _more(bad))
+
+
+def gravity_problem(precision: str, gravity, speed: float) -> str | None:
+    """Why gravity [m/s^2], which gives spheres up to ``speed`` [m/s], overflows
+    ``precision``, or None."""
+    limit = largest_speed(precision)
+    g = math.hypot(*(float(c) for c in gravity))
+    if speed <= limit and g <= limit ** 2:
+        return None
+    return (f"gravity [{', '.join(f'{g:g}' for g in gravity)}] m/s^2 overflows {precision}: it gives "
+            f"spheres speeds up to {speed:.3g} m/s, and {precision} holds at most "
+            f"{limit:.2g} m/s")
 
 
 def _array(name, value, ndim):

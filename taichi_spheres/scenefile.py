@@ -162,6 +162,7 @@ def _check_render(render, run, problems):
                             f"got {render[key]}")
     if "colours" in render and render["colours"] not in ("group", "speed"):
         problems.append(f"render.colours: must be \"group\" or \"speed\", got {render['colours']!r}")
+    _check_colour("render.background", _valid(render, "background", _RENDER), problems)
     if "fov" in render and _is_number(render["fov"]) and not 0 < render["fov"] < 180:
         problems.append(f"render.fov: must be in (0, 180) degrees, got {render['fov']}")
     for key in ("duration", "fps"):
@@ -217,7 +218,8 @@ def _valid(table, key, schema):
 
 def _check_group(kind, where, item, schema, problems):
     """Problems in one [[spheres]]/[[lattice]]/[[random]] table that need no geometry."""
-    missing = [k for k in _REQUIRED[kind] if k not in item]
+    misspelt = _misspelt_keys(item, schema)
+    missing = [k for k in _REQUIRED[kind] if k not in item and k not in misspelt]
     if missing:
         problems.append(f"{where}: missing " + ", ".join(f"'{k}'" for k in missing))
     for a, b in (("mass", "density"), ("v", "speed")):
@@ -231,12 +233,26 @@ def _check_group(kind, where, item, schema, problems):
         value = _valid(item, key, schema) if key in schema else None
         if value is not None and not value >= least:
             problems.append(f"{where}.{key}: must be >= {least}, got {value!r}")
+    _check_colour(f"{where}.colour", _valid(item, "colour", schema), problems)
     lo, hi = _valid(item, "lo", schema), _valid(item, "hi", schema)
     if kind != "spheres" and lo is not None and hi is not None:
         for a in range(3):
             if not hi[a] > lo[a]:
                 problems.append(f"{where}: hi must exceed lo on axis {'xyz'[a]} "
                                 f"({lo[a]} .. {hi[a]})")
+
+
+def _misspelt_keys(table, schema):
+    """The valid keys that unknown keys of ``table`` look like misspellings of (those are
+    reported as unknown keys with the nearest name, not as missing)."""
+    return {near[0] for key in table if key not in schema
+            for near in [difflib.get_close_matches(key, list(schema), n=1)] if near}
+
+
+def _check_colour(name, colour, problems):
+    """A colour (None: absent or of the wrong type, reported elsewhere) is RGB in [0, 1]."""
+    if colour is not None and not all(0.0 <= c <= 1.0 for c in colour):
+        problems.append(f"{name}: red, green and blue must each be in [0, 1], got {colour}")
 
 
 def _check_values(box, physics, problems):

@@ -887,3 +887,45 @@ def test_radius_spread_gives_polydisperse_random_group(tmp_path):
     assert scene.radius.max() / scene.radius.min() > 1.5
     # masses follow the radii through the (default) density
     np.testing.assert_allclose(scene.mass, 1000.0 * 4 / 3 * np.pi * scene.radius ** 3)
+
+
+# --------------------------------------------------------------------------- what f64 can hold
+
+def test_misspelt_required_key_is_reported_as_unknown_not_missing(tmp_path):
+    problems, _ = load_problems(tmp_path, GOOD.replace("radius = 0.1", "radious = 0.1"))
+    assert problems == ["unknown key 'spheres[0].radious' (did you mean 'spheres[0].radius'?)"]
+
+
+@pytest.mark.parametrize("where, text", [
+    ("spheres[0].colour", "mass = 2.0\ncolour = [2.0, 0.3, 0.25]"),
+    ("spheres[0].colour", "mass = 2.0\ncolour = [0.5, -0.1, 0.25]"),
+    ("render.background", "mass = 2.0\n[render]\nbackground = [0.1, 0.1, 1.5]"),
+])
+def test_colour_outside_zero_to_one_is_an_error(tmp_path, where, text):
+    problems, _ = load_problems(tmp_path, GOOD.replace("mass = 2.0", text, 1))
+    assert len(problems) == 1 and problems[0].startswith(f"{where}: red, green and blue must "
+                                                         f"each be in [0, 1]")
+
+
+def test_colour_inside_zero_to_one_is_kept(tmp_path):
+    s = ts.load_scene(write(tmp_path, GOOD.replace("mass = 2.0", "mass = 2.0\ncolour = [1, 0, 0.5]")))
+    np.testing.assert_array_equal(s.meta["group_colours"][0], [1.0, 0.0, 0.5])
+
+
+def test_radius_below_what_f64_resolves_names_the_radius_not_the_mass(tmp_path):
+    problems, _ = load_problems(tmp_path, GOOD.replace("radius = 0.05", "radius = 1e-300"))
+    assert len(problems) == 1
+    assert problems[0].startswith("radius of sphere 1 (1e-300 m) is below what f64 can simulate")
+    assert "mass" not in problems[0]
+
+
+def test_speed_overflowing_f64_names_the_sphere():
+    v = np.zeros((6, 3))
+    v[4] = [1e300, 0.8, 1.0]
+    with pytest.raises(ValueError, match=r"^speed of sphere 4 \(1e\+300 m/s\) overflows f64"):
+        make(n=6, v=v)
+
+
+def test_gravity_overflowing_f64_is_named():
+    with pytest.raises(ValueError, match=r"^gravity \[0, 0, -1e\+307\] m/s\^2 overflows f64"):
+        make(n=2, gravity=(0.0, 0.0, -1e307))
