@@ -1,13 +1,30 @@
 """taichi_spheres: parallel hard-sphere simulation with exact rewind to contact.
 
-Importing the package never initialises Taichi; :class:`Simulation` does, for the
-arch it is asked to run on.
+Importing the package never initialises Taichi, nor imports it: :class:`Scene`,
+:func:`load_scene` and :mod:`observe` are plain numpy, and the names that need Taichi
+(:class:`Simulation`, :class:`State`) import it on first use. :class:`Simulation`
+initialises Taichi for the arch it is asked to run on.
 """
+import importlib
+
 from .scene import Scene
 from .scenefile import load_scene
-from .simulation import Simulation
-from .state import State
 from . import observe
 
 __all__ = ["Scene", "Simulation", "State", "load_scene", "observe", "__version__"]
 __version__ = "0.1.0"
+
+#: public names imported from their module on first use (those modules import Taichi)
+_LAZY = {"Simulation": ".simulation", "State": ".state"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name], __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY))

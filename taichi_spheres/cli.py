@@ -1,11 +1,16 @@
 """Command line: ``taichi-spheres run SCENE`` and ``taichi-spheres info SCENE``.
 
-Exit codes: 0 done, 2 bad input (scene, options, output path), 3 rendering not
-available, 130 interrupted (the frames written so far are kept, playable).
+Exit codes: 0 done, 2 bad input (scene, options, output path, a run far beyond what
+real scenes need: see workload.MAX_STEPS), 3 rendering not available, 130 interrupted
+(the frames written so far are kept, playable).
+
+Parsing the command line, ``--help`` and reading the scene do not import Taichi; the
+engine is imported when ``info`` or ``run`` needs it. Details: docs/cli.md.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import sys
@@ -13,7 +18,9 @@ import time
 
 import numpy as np
 
+from . import workload
 from .interrupts import hold_interrupts
+from .progress import STATUS_EVERY, Progress, status_reports
 from .scene import Scene
 from .scenefile import load_scene
 
@@ -24,6 +31,7 @@ EXIT_INTERRUPTED = 130
 DEFAULT_DURATION = 5.0
 DEFAULT_FPS = 30.0
 DEFAULT_SIZE = (640, 480)
+DEFAULT_BACKGROUND = (0.08, 0.08, 0.10)
 #: --compile auto: "fast" below this many spheres, else "optimized" (runtime.COMPILE_MODES;
 #: taichi is imported only when a run starts).
 #: Fast compiling saves ~10 s once and costs ~8 % per step (tools/compile_options.py:
@@ -35,6 +43,21 @@ AUTO_FAST_BELOW = 500_000
 #: does not import Taichi (tests/test_cli.py checks that they agree).
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
 COMPILE_CHOICES = ("auto", "fast", "optimized")
+#: Taichi prints a banner on stdout when imported unless this environment variable is
+#: "0"; the command line sets it (when unset) so that ``info`` prints only its report
+#: (the run header names Taichi's version instead).
+TAICHI_BANNER_ENV = "ENABLE_TAICHI_HEADER_PRINT"
+
+
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Appends "(default: X)" to an option's help unless the help already states its
+    default or the option has none (None, False)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "default" in text or action.default in (None, False, argparse.SUPPRESS):
+            return text
+        return super()._get_help_string(action)
 
 
 def _size(text):
@@ -62,16 +85,28 @@ def _positive(kind):
 
 def build_parser():
     p = argparse.ArgumentParser(
-        prog="taichi-spheres", formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        prog="taichi-spheres", formatter_class=_HelpFormatter,
         description="Hard-sphere simulations with exact rewind to contact, scene file in, "
                     "mp4 and diagnostics CSV out.")
     sub = p.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="simulate a scene, write OUT.mp4 and OUT.csv",
-                         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    _add_run_arguments(sub.add_parser("run", help="simulate a scene, write OUT.mp4 and OUT.csv",
+                                      formatter_class=_HelpFormatter))
+    info = sub.add_parser("info", formatter_class=_HelpFormatter,
+                          help="validate a scene; show what it compiles in and the work a run needs")
+    info.add_argument("scene")
+    info.add_argument("--arch", default="cpu", choices=ARCHS, help="where the kernels would run")
+    info.add_argument("--calibrate", action="store_true",
+                      help="time a few steps on this machine for the wall-time estimate "
+                           "(compiles the kernels: seconds); without it the estimate uses "
+                           "reference figures")
+    return p
+
+
+def _add_run_arguments(run):
     run.add_argument("scene", help="scene file (TOML)")
     run.add_argument("-o", "--output", default=None,
                      help="output video path (default: out/<scene name>.mp4)")
-    run.add_argument("--arch", default="cpu", choices=ARCHS)
+    run.add_argument("--arch", default="cpu", choices=ARCHS, help="where the kernels run")
     run.add_argument("--precision", default=None, choices=["f32", "f64"],
                      help="default: the scene's, else f64 on cpu/cuda, f32 on vulkan/metal")
     run.add_argument("--duration", type=_positive(float), default=None,
@@ -97,15 +132,20 @@ def build_parser():
                           "~8%% slower, same results) or optimized; auto: "
                           f"TAICHI_SPHERES_COMPILE if set, else fast below {AUTO_FAST_BELOW:,} "
                           "spheres")
-    run.add_argument("--quiet", action="store_true", help="no progress bar")
-    info = sub.add_parser("info", help="validate a scene and show what it compiles in")
-    info.add_argument("scene")
-    info.add_argument("--arch", default="cpu", choices=ARCHS)
-    return p
+    run.add_argument("--force", action="store_true",
+                     help=f"run even when the estimated work is beyond what real scenes need "
+                          f"(more than {workload.MAX_STEPS:.0e} steps)")
+    run.add_argument("--quiet", action="store_true",
+                     help="no progress bar (status lines still come every --status-every "
+                          "seconds and on SIGUSR1)")
+    run.add_argument("--status-every", type=_positive(float), default=STATUS_EVERY,
+                     metavar="SECONDS",
+                     help="print a status line when none was printed for this long")
 
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
+    os.environ.setdefault(TAICHI_BANNER_ENV, "0")
     try:
         scene = load_scene(args.scene)
     except ValueError as exc:
@@ -129,6 +169,26 @@ def _settings(scene: Scene):
             scene.meta.get("render", {}))
 
 
+def _precision(scene: Scene, asked, arch) -> str:
+    """--precision, else the scene's [physics] precision, else the arch's default."""
+    from . import runtime
+    return asked or scene.meta.get("physics", {}).get("precision") or \
+        runtime.default_precision(arch)
+
+
+def check_work(scene: Scene, precision, duration, fps, step_fraction, force=False):
+    """The Workload of a run; ValueError naming the sphere or setting at fault when the
+    precision cannot hold the scene, or (unless ``force``) the run is beyond MAX_STEPS."""
+    work = workload.estimate(scene, duration, fps, step_fraction)
+    problems = workload.precision_problems(scene, precision, work)
+    if problems:
+        raise ValueError("; ".join(problems))
+    refused = workload.refusal(work)
+    if refused and not force:
+        raise ValueError(refused)
+    return work
+
+
 def cmd_info(scene: Scene, args):
     from . import runtime
     from .grid import GridGeometry
@@ -141,6 +201,7 @@ def cmd_info(scene: Scene, args):
     rest_speed = rest_speed_for(scene, fraction)
     features = Features.from_scene(scene, rest_speed)
     memory = estimate_field_bytes(scene, precision, fraction)
+    duration, fps = run.get("duration", DEFAULT_DURATION), run.get("fps", DEFAULT_FPS)
     print(f"scene: {scene.name} ({scene.meta.get('source', '')})")
     print(f"spheres: {scene.n}, radius {scene.radius.min():g}..{scene.radius.max():g} m, "
           f"mass {scene.mass.min():g}..{scene.mass.max():g} kg")
@@ -149,175 +210,295 @@ def cmd_info(scene: Scene, args):
     print(f"gravity: {scene.gravity.tolist()} m/s^2, restitution {scene.restitution:g} "
           f"({scene.restitution_model}), wall restitution {scene.wall_restitution:g}, "
           f"rest speed {rest_speed:.3g} m/s")
-    print(f"run: duration {run.get('duration', DEFAULT_DURATION):g} s at "
-          f"{run.get('fps', DEFAULT_FPS):g} fps; precision {precision}; step_fraction {fraction:g}")
+    print(f"run: duration {duration:g} s at {fps:g} fps; precision {precision}; "
+          f"step_fraction {fraction:g}")
     print(f"grid: {geom.dims[0]}x{geom.dims[1]}x{geom.dims[2]} cells, {len(geom.colours)} colours")
     print("compiled in:")
     for line in features.describe():
         print(f"  {line}")
     print(f"device memory: about {memory / 2**20:.2f} MiB ({memory / scene.n:.0f} B per sphere, "
           f"grid included)")
+    return _print_info_work(scene, args, precision, duration, fps, fraction)
+
+
+def _print_info_work(scene, args, precision, duration, fps, fraction):
+    """The work lines of ``info``; exit status 2 when the precision cannot hold the scene."""
+    work = workload.estimate(scene, duration, fps, fraction)
+    print(f"work: {work.describe()}")
+    problems = workload.precision_problems(scene, precision, work)
+    if problems:
+        print(f"error: {'; '.join(problems)}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    refused = workload.refusal(work)
+    if refused:
+        print(f"refused: `run` refuses this without --force: {refused}")
+        return 0
+    if args.calibrate:
+        per_step = _calibrate_info(scene, args.arch, precision, fraction, fps, work)
+        print(f"wall time: {_timing(per_step, work)} measured on this machine")
+    else:
+        per_step = workload.model_step_seconds(scene.n)
+        print(f"wall time: {_timing(per_step, work)} on the reference CPU, for free flight "
+              f"(dense piles step slower; --calibrate times this machine)")
     return 0
 
 
-class Progress:
-    """One status line on stderr: simulated time, steps, collisions, ETA."""
-
-    def __init__(self, total_frames, duration, quiet=False):
-        self.total = total_frames
-        self.duration = duration
-        self.quiet = quiet
-        self.tty = sys.stderr.isatty()
-        self.t0 = time.perf_counter()
-        self.last = -1.0
-        self.last_tenth = -1
-
-    def update(self, frame, sim, final=False):
-        if self.quiet:
-            return
-        now = time.perf_counter()
-        done = (frame + 1) / self.total
-        tenth = int(done * 10)
-        if not final and (self.tty and now - self.last < 0.2 or
-                          not self.tty and tenth == self.last_tenth):
-            return
-        self.last, self.last_tenth = now, tenth
-        elapsed = now - self.t0
-        eta = elapsed / done * (1 - done) if done > 0 else float("nan")
-        st = sim.stats
-        bar = "#" * int(24 * done)
-        line = (f"[{bar:<24}] t={sim.time:.3f}/{self.duration:g} s  steps={st['steps']}  "
-                f"collisions={st['pair_collisions']}+{st['wall_collisions']} wall  "
-                f"ETA {eta:5.1f} s")
-        end = "\n" if final or not self.tty else ""
-        print(("\r" if self.tty else "") + line, end=end, file=sys.stderr, flush=True)
+def _calibrate_info(scene, arch, precision, fraction, fps, work):
+    """Seconds a step takes on this machine, timed on a Simulation built for it."""
+    from . import runtime
+    from .simulation import Simulation
+    runtime.ensure(arch, precision, compile=compile_mode("auto", scene.n))
+    sim = Simulation(scene, arch=arch, precision=precision, step_fraction=fraction)
+    return workload.measure_step_seconds(sim, 1.0 / fps, work.steps)[0]
 
 
-def cmd_run(scene: Scene, args):
-    from . import checkpoint
-    from .output import DiagnosticsWriter, VideoWriter, check_writable
-    from .simulation import DEFAULT_MAX_SWEEPS, DEFAULT_STEP_FRACTION, Simulation
+def _timing(per_step, work) -> str:
+    return (f"{workload.rough_duration(per_step * work.steps)} of stepping "
+            f"({per_step * 1e3:.3g} ms a step)")
+
+
+@dataclasses.dataclass
+class RunSettings:
+    """What a run does, from the command line and the scene file: duration [s], fps,
+    frame size, output paths (video, csv, npz, checkpoint) and switches."""
+
+    duration: float
+    fps: float
+    size: tuple
+    video_path: str
+    npz: bool
+    checkpoint_every: int | None
+    step_fraction: float
+    max_sweeps: int
+
+    @property
+    def stem(self):
+        return os.path.splitext(self.video_path)[0]
+
+    @property
+    def csv_path(self):
+        return self.stem + ".csv"
+
+    @property
+    def npz_path(self):
+        return self.stem + ".npz"
+
+    @property
+    def ckpt_path(self):
+        return self.stem + ".ckpt.npz"
+
+    @property
+    def frames(self):
+        return workload.frame_count(self.duration, self.fps)
+
+
+def run_settings(scene: Scene, args) -> RunSettings:
+    from .simulation import DEFAULT_MAX_SWEEPS, DEFAULT_STEP_FRACTION
     run, physics, render = _settings(scene)
-    duration = args.duration or run.get("duration", DEFAULT_DURATION)
-    fps = args.fps or run.get("fps", DEFAULT_FPS)
-    size = args.size or (render.get("width", DEFAULT_SIZE[0]), render.get("height", DEFAULT_SIZE[1]))
     output = scene.meta.get("output", {})
     video_path = args.output or output.get("video")
-    args.npz = args.npz or output.get("snapshots", False)
-    args.checkpoint_every = args.checkpoint_every or output.get("checkpoint_every")
     if video_path is None:
         video_path = os.path.join("out", f"{scene.name}.mp4")
         os.makedirs("out", exist_ok=True)
-    stem = os.path.splitext(video_path)[0]
-    csv_path, npz_path = stem + ".csv", stem + ".npz"
-    try:
-        if not video_path.lower().endswith(".mp4"):
-            raise ValueError(f"output must end in .mp4, got {video_path}")
-        for path in [csv_path] + ([] if args.no_video else [video_path]) + \
-                ([npz_path] if args.npz else []):
-            check_writable(path)
-        precision = args.precision or physics.get("precision")
-        from . import runtime
-        runtime.ensure(args.arch, precision, compile=compile_mode(args.compile, scene.n))
-        sim = Simulation(scene, arch=args.arch,
-                         precision=precision,
-                         step_fraction=physics.get("step_fraction", DEFAULT_STEP_FRACTION),
-                         max_sweeps=physics.get("max_sweeps", DEFAULT_MAX_SWEEPS),
-                         fused=args.fused)
-        start_frame = 0
-        if args.resume:
-            start_frame = checkpoint.load(args.resume, sim, scene, fps) + 1
-    except (ValueError, RuntimeError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    ckpt_path = stem + ".ckpt.npz"
-    renderer = None
-    if not args.no_video:
-        from .render import RenderUnavailable, Renderer, palette
-        colours = palette(scene.meta.get("groups", np.zeros(scene.n, dtype=np.int64)))
-        table = scene.meta.get("group_colours")
-        groups = scene.meta.get("groups")
-        if table is not None and groups is not None and len(table):
-            given = table[groups]
-            colours = np.where(given[:, :1] >= 0, given, colours).astype(np.float32)
-        camera = {k: render[f"camera_{k}"] for k in ("position", "lookat") if f"camera_{k}" in render}
-        if "fov" in render:
-            camera["fov"] = render["fov"]
-        try:
-            renderer = Renderer(scene, size=size, camera=camera,
-                                colours=render.get("colours", "group"), colour_table=colours,
-                                background=render.get("background", (0.08, 0.08, 0.10)))
-        except RenderUnavailable as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return EXIT_NO_RENDER
-    frames = int(math.floor(duration * fps + 1e-9)) + 1
+    return RunSettings(
+        duration=args.duration or run.get("duration", DEFAULT_DURATION),
+        fps=args.fps or run.get("fps", DEFAULT_FPS),
+        size=args.size or (render.get("width", DEFAULT_SIZE[0]),
+                           render.get("height", DEFAULT_SIZE[1])),
+        video_path=video_path, npz=args.npz or output.get("snapshots", False),
+        checkpoint_every=args.checkpoint_every or output.get("checkpoint_every"),
+        step_fraction=physics.get("step_fraction", DEFAULT_STEP_FRACTION),
+        max_sweeps=physics.get("max_sweeps", DEFAULT_MAX_SWEEPS))
+
+
+def _check_outputs(settings: RunSettings, no_video):
+    """ValueError before simulating when an output cannot be written."""
+    from .output import check_writable
+    if not settings.video_path.lower().endswith(".mp4"):
+        raise ValueError(f"output must end in .mp4, got {settings.video_path}")
+    for path in [settings.csv_path] + ([] if no_video else [settings.video_path]) + \
+            ([settings.npz_path] if settings.npz else []):
+        check_writable(path)
+
+
+def _start_simulation(scene: Scene, settings: RunSettings, args):
+    """(Simulation, first frame, Workload), after checking outputs, precision and work;
+    ValueError or RuntimeError for bad input."""
+    from . import checkpoint, runtime
+    from .simulation import Simulation
+    _check_outputs(settings, args.no_video)
+    precision = _precision(scene, args.precision, args.arch)
+    work = check_work(scene, precision, settings.duration, settings.fps,
+                      settings.step_fraction, force=args.force)
+    runtime.ensure(args.arch, precision, compile=compile_mode(args.compile, scene.n))
+    sim = Simulation(scene, arch=args.arch, precision=precision,
+                     step_fraction=settings.step_fraction, max_sweeps=settings.max_sweeps,
+                     fused=args.fused)
+    start_frame = 0
+    if args.resume:
+        start_frame = checkpoint.load(args.resume, sim, scene, settings.fps) + 1
+    return sim, start_frame, work
+
+
+def _make_renderer(scene: Scene, settings: RunSettings):
+    """The offscreen renderer for the scene's [render] settings (RenderUnavailable)."""
+    from .render import Renderer, palette
+    render = scene.meta.get("render", {})
+    colours = palette(scene.meta.get("groups", np.zeros(scene.n, dtype=np.int64)))
+    table = scene.meta.get("group_colours")
+    groups = scene.meta.get("groups")
+    if table is not None and groups is not None and len(table):
+        given = table[groups]
+        colours = np.where(given[:, :1] >= 0, given, colours).astype(np.float32)
+    camera = {k: render[f"camera_{k}"] for k in ("position", "lookat") if f"camera_{k}" in render}
+    if "fov" in render:
+        camera["fov"] = render["fov"]
+    return Renderer(scene, size=settings.size, camera=camera,
+                    colours=render.get("colours", "group"), colour_table=colours,
+                    background=render.get("background", DEFAULT_BACKGROUND))
+
+
+def _print_header(scene, settings, sim, renderer, work):
+    import taichi as ti
     rt = sim.runtime
-    print(f"taichi-spheres: {scene.name}, {scene.n} spheres, {duration:g} s at {fps:g} fps "
-          f"({frames} frames); arch {rt.arch} (Taichi {rt.actual}), {sim.precision}, "
+    print(f"taichi-spheres: {scene.name}, {scene.n} spheres, {settings.duration:g} s at "
+          f"{settings.fps:g} fps ({settings.frames} frames); arch {rt.arch} (Taichi "
+          f"{'.'.join(map(str, ti.__version__))} on {rt.actual}), {sim.precision}, "
           f"{rt.compile} compile; "
           f"renderer: {'none (--no-video)' if renderer is None else 'GGUI offscreen'}",
           file=sys.stderr)
-    progress = Progress(frames, duration, args.quiet)
-    earlier = checkpoint.set_aside(video_path) if renderer is not None and start_frame else None
-    video = VideoWriter(video_path, fps) if renderer is not None else None
-    diag = DiagnosticsWriter(csv_path, scene.gravity, keep_frames=start_frame)
-    snaps_x, snaps_v, snaps_t = [], [], []
-    render_seconds = 0.0
-    status = 0
-    frame = start_frame - 1
+    print(f"work: {work.describe()}" + ("; above the limit, run with --force"
+                                       if workload.refusal(work) else ""), file=sys.stderr)
+
+
+def _print_timing(sim, settings, work, start_frame):
+    """Time a few steps (compiling the kernels on the way) and print the wall-time estimate."""
+    left = work.steps * (1.0 - start_frame / settings.frames)
+    per_step, took = workload.measure_step_seconds(sim, 1.0 / settings.fps, left)
+    print(f"timing: {per_step * 1e3:.3g} ms a step (measured in {took:.1f} s, compiling "
+          f"included): {workload.rough_duration(per_step * left)} of stepping, plus "
+          f"writing {settings.frames - start_frame} frames", file=sys.stderr)
+
+
+class RunOutputs:
+    """The files a run writes frame by frame: video, diagnostics CSV, snapshots, checkpoint."""
+
+    def __init__(self, scene, settings: RunSettings, renderer, start_frame):
+        from . import checkpoint
+        from .output import DiagnosticsWriter, VideoWriter
+        self.scene, self.settings, self.renderer = scene, settings, renderer
+        self.earlier = checkpoint.set_aside(settings.video_path) \
+            if renderer is not None and start_frame else None
+        self.video = VideoWriter(settings.video_path, settings.fps) if renderer else None
+        self.diag = DiagnosticsWriter(settings.csv_path, scene.gravity, keep_frames=start_frame)
+        self.snaps = ([], [], [])
+        self.render_seconds = 0.0
+        self.start_frame = start_frame
+
+    def copy_earlier_video(self):
+        from . import checkpoint
+        if self.earlier:     # (interrupted here, the next --resume starts from it again)
+            checkpoint.copy_video_prefix(self.earlier, self.video, self.start_frame)
+
+    def write(self, frame, sim):
+        from . import checkpoint
+        st = sim.state()
+        self.diag.write(frame, st, sim.stats)
+        if self.settings.npz:
+            for store, value in zip(self.snaps, (st.x.astype(np.float32),
+                                                 st.v.astype(np.float32), st.time)):
+                store.append(value)
+        if self.video is not None:
+            t0 = time.perf_counter()
+            self.video.write(self.renderer.frame(st))
+            self.render_seconds += time.perf_counter() - t0
+        every = self.settings.checkpoint_every
+        if every and (frame + 1) % every == 0:
+            checkpoint.save(self.settings.ckpt_path, sim, self.scene, frame, self.settings.fps)
+
+    def close(self):
+        """Close every file (Ctrl-C held meanwhile) and say which were written."""
+        s = self.settings
+        with hold_interrupts():
+            if self.video is not None:
+                self.video.close()
+            self.diag.close()
+            if s.npz and self.snaps[0]:
+                np.savez_compressed(s.npz_path, x=np.stack(self.snaps[0]),
+                                    v=np.stack(self.snaps[1]), time=np.array(self.snaps[2]),
+                                    radius=self.scene.radius, mass=self.scene.mass)
+            if self.renderer is not None:
+                self.renderer.close()
+            written = [p for p, on in ((s.video_path, self.video is not None), (s.csv_path, True),
+                                       (s.npz_path, s.npz and bool(self.snaps[0])),
+                                       (s.ckpt_path, bool(s.checkpoint_every))) if on]
+            print(f"wrote {', '.join(written)} ({self.diag.rows} frames)", file=sys.stderr)
+
+
+def cmd_run(scene: Scene, args):
+    settings = run_settings(scene, args)
+    progress = Progress(settings.duration, settings.frames, args.quiet, args.status_every)
+    with status_reports(progress):
+        try:
+            sim, start_frame, work = _start_simulation(scene, settings, args)
+        except (ValueError, RuntimeError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        renderer = None
+        if not args.no_video:
+            from .render import RenderUnavailable
+            try:
+                renderer = _make_renderer(scene, settings)
+            except RenderUnavailable as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                return EXIT_NO_RENDER
+        _print_header(scene, settings, sim, renderer, work)
+        try:
+            _print_timing(sim, settings, work, start_frame)
+        except KeyboardInterrupt:
+            if renderer is not None:
+                renderer.close()
+            print("\ninterrupted before the first frame; nothing written", file=sys.stderr)
+            return EXIT_INTERRUPTED
+        progress.steps = work.steps
+        progress.attach(sim)
+        outputs = RunOutputs(scene, settings, renderer, start_frame)
+        status = _run_frames(sim, outputs, progress, settings, start_frame)
+    _print_summary(sim, outputs.render_seconds)
+    return status
+
+
+def _run_frames(sim, outputs: RunOutputs, progress, settings, start_frame):
+    """Step frame by frame, writing each; the exit status (130 when interrupted)."""
+    status, frame = 0, start_frame - 1
     try:
-        if earlier:     # (interrupted here, the next --resume starts from `earlier` again)
-            checkpoint.copy_video_prefix(earlier, video, start_frame)
-        for frame in range(start_frame, frames):
-            sim.advance_to(frame / fps)
-            st = sim.state()
-            diag.write(frame, st, sim.stats)
-            if args.npz:
-                snaps_x.append(st.x.astype(np.float32))
-                snaps_v.append(st.v.astype(np.float32))
-                snaps_t.append(st.time)
-            if video is not None:
-                t0 = time.perf_counter()
-                video.write(renderer.frame(st))
-                render_seconds += time.perf_counter() - t0
-            if args.checkpoint_every and (frame + 1) % args.checkpoint_every == 0:
-                checkpoint.save(ckpt_path, sim, scene, frame, fps)
-            progress.update(frame, sim, final=frame == frames - 1)
+        outputs.copy_earlier_video()
+        for frame in range(start_frame, settings.frames):
+            sim.advance_to(frame / settings.fps)
+            outputs.write(frame, sim)
+            progress.frame_done(frame, final=frame == settings.frames - 1)
     except KeyboardInterrupt:
         status = EXIT_INTERRUPTED
         print(f"\ninterrupted at frame {frame} (t = {sim.time:.4g} s)"
-              + (f"; continue with --resume {ckpt_path}" if args.checkpoint_every else ""),
-              file=sys.stderr)
+              + (f"; continue with --resume {settings.ckpt_path}"
+                 if settings.checkpoint_every else ""), file=sys.stderr)
     except Exception as exc:   # keep what was written, then re-raise after closing
-        status = 1
         print(f"\nerror at frame {frame}: {exc!r}", file=sys.stderr)
         raise
     finally:
         try:
-            # held: a Ctrl-C while closing waits for the files (a second one aborts)
-            with hold_interrupts():
-                if video is not None:
-                    video.close()
-                diag.close()
-                if args.npz and snaps_x:
-                    np.savez_compressed(npz_path, x=np.stack(snaps_x), v=np.stack(snaps_v),
-                                        time=np.array(snaps_t), radius=scene.radius,
-                                        mass=scene.mass)
-                if renderer is not None:
-                    renderer.close()
-                written = [p for p, on in ((video_path, video is not None), (csv_path, True),
-                                           (npz_path, args.npz and bool(snaps_x)),
-                                           (ckpt_path, bool(args.checkpoint_every))) if on]
-                print(f"wrote {', '.join(written)} ({diag.rows} frames)", file=sys.stderr)
+            outputs.close()
         except KeyboardInterrupt:
             status = EXIT_INTERRUPTED
+    return status
 
+
+def _print_summary(sim, render_seconds):
     st = sim.stats
     print(f"simulation: {sim.sim_seconds:.2f} s wall for {sim.time:g} s simulated, "
           f"{st['steps']} steps, {st['pair_collisions']} pair + {st['wall_collisions']} wall "
           f"collisions, max overlap {st['max_overlap']:.2e}, unresolved {st['unresolved']}; "
           f"rendering: {render_seconds:.2f} s", file=sys.stderr)
-    return status
 
 
 if __name__ == "__main__":

@@ -219,3 +219,122 @@ def test_cli_choices_match_the_runtime():
     from taichi_spheres import cli, runtime
     assert cli.ARCHS == runtime.ARCHS
     assert set(cli.COMPILE_CHOICES) == set(runtime.COMPILE_MODES) | {"auto"}
+
+
+ROOT = os.path.join(os.path.dirname(__file__), "..")
+SEED_FIVE = open(os.path.join(ROOT, "scenes", "seed_five.toml")).read()
+
+
+def seed_five(tmp_path, *changes, name="s.toml"):
+    """scenes/seed_five.toml with lines changed (pairs of old, new), as tmp_path/name."""
+    text = SEED_FIVE
+    for old, new in changes:
+        assert old in text
+        text = text.replace(old, new, 1)
+    (tmp_path / name).write_text(text)
+    return name
+
+
+def test_help_and_info_print_no_taichi_banner(tmp_path):
+    for args in (["--help"], ["run", "--help"]):
+        r = cli(*args, cwd=tmp_path, timeout=120)
+        assert r.returncode == 0 and "[Taichi]" not in r.stdout + r.stderr
+    assert "(default: None)" not in r.stdout
+    assert "(default: out/<scene name>.mp4)\n" in r.stdout.replace("\n" + " " * 24, " ")
+    code = ("import sys, contextlib, io\nimport taichi_spheres as ts, taichi_spheres.cli as c\n"
+            "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+            "    c.main(['run', '--help'])\nprint('taichi' in sys.modules, ts.Scene.__name__)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.stdout.split() == ["False", "Scene"], r.stderr
+    r = cli("info", seed_five(tmp_path), cwd=tmp_path, timeout=120)
+    assert r.returncode == 0 and r.stdout.startswith("scene: seed_five"), r.stdout + r.stderr
+    assert "work: about 1.2e+04 steps" in r.stdout and "wall time: about" in r.stdout
+
+
+@pytest.mark.parametrize("old, new, words", [
+    ("gravity = [0.0, 0.0, -9.81]", "gravity = [0.0, 0.0, -1e12]",
+     ["gravity [0, 0, -1e+12] m/s^2", "sphere 2", "--force"]),
+    ("v = [1.5, 0.8, 1.0]", "v = [1e8, 0.8, 1.0]", ["sphere 0 moves at 1e+08 m/s", "--force"]),
+    ("fps = 30", "fps = 1e9", ["fps", "--force"]),
+])
+def test_runs_beyond_the_work_limit_are_refused(tmp_path, old, new, words):
+    r = cli("run", seed_five(tmp_path, (old, new)), "--no-video", "--duration", "0.2", "--quiet",
+            "-o", "s.mp4", cwd=tmp_path, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr
+    for w in words:
+        assert w in r.stderr
+    assert not (tmp_path / "s.csv").exists()
+
+
+@pytest.mark.parametrize("new, args, words", [
+    ("v = [1e300, 0.8, 1.0]", [], ["speed of sphere 0 (1e+300 m/s) overflows f64"]),
+    ("v = [1e19, 0.8, 1.0]", ["--precision", "f32"], ["speed of sphere 0 (1e+19 m/s) overflows f32"]),
+])
+def test_speeds_the_precision_cannot_hold_exit_2(tmp_path, new, args, words):
+    r = cli("run", seed_five(tmp_path, ("v = [1.5, 0.8, 1.0]", new)), "--no-video", "--quiet",
+            "--duration", "0.2", *args, cwd=tmp_path, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    for w in words:
+        assert w in r.stderr
+
+
+@pytest.mark.parametrize("old, new, words", [
+    ("radius = 0.06\n", "radious = 0.06\n",
+     ["unknown key 'spheres[0].radious' (did you mean 'spheres[0].radius'?)"]),
+    ("colour = [0.90, 0.30, 0.25]", "colour = [2.0, 0.3, 0.25]", ["spheres[0].colour", "[0, 1]"]),
+    ("radius = 0.06\n", "radius = 1e-300\n", ["radius of sphere 0 (1e-300 m) is below what f64"]),
+])
+def test_scene_mistakes_exit_2_naming_the_key(tmp_path, old, new, words):
+    r = cli("run", seed_five(tmp_path, (old, new)), "--no-video", "--quiet", cwd=tmp_path,
+            timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "1 problem(s)" in r.stderr and "missing" not in r.stderr and "mass" not in r.stderr
+    for w in words:
+        assert w in r.stderr
+
+
+def test_many_frames_show_their_work_up_front(tmp_path):
+    """fps = 1e6 for 0.2 s: legitimate, slow, and said before it starts."""
+    name = seed_five(tmp_path, ("duration = 12.0", "duration = 0.2"), ("fps = 30", "fps = 1e6"))
+    r = cli("info", name, cwd=tmp_path, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "work: about 2.0e+05 steps" in r.stdout and "200001 frames" in r.stdout
+    assert "refused" not in r.stdout
+
+
+def test_quiet_run_prints_status_lines(tmp_path):
+    r = cli("run", seed_five(tmp_path), "--no-video", "--quiet", "--duration", "0.1",
+            "--status-every", "0.001", "-o", "s.mp4", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert "[Taichi] version" not in r.stdout and "(Taichi 1.7" in r.stderr
+    assert "work: about" in r.stderr and "timing: " in r.stderr and "ms a step" in r.stderr
+    assert "status: frame" in r.stderr and "[#" not in r.stderr
+
+
+def wait_for(path, text, seconds):
+    deadline = time.time() + seconds
+    while time.time() < deadline:
+        if path.exists() and text in path.read_text():
+            return True
+        time.sleep(0.2)
+    return False
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGUSR1"), reason="no SIGUSR1 here")
+def test_forced_slow_run_reports_on_sigusr1(tmp_path):
+    name = seed_five(tmp_path, ("gravity = [0.0, 0.0, -9.81]", "gravity = [0.0, 0.0, -1e12]"))
+    err = tmp_path / "err.txt"
+    with open(err, "w") as fh:
+        proc = subprocess.Popen([sys.executable, "-m", "taichi_spheres.cli", "run", name,
+                                 "--no-video", "--quiet", "--force", "-o", "s.mp4"],
+                                cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=fh)
+        try:
+            assert wait_for(err, "timing:", 300), err.read_text()
+            assert "above the limit" in err.read_text()
+            proc.send_signal(signal.SIGUSR1)
+            assert wait_for(err, "status: frame", 120), err.read_text()
+        finally:
+            proc.send_signal(signal.SIGINT)
+            proc.wait(timeout=120)
+    assert proc.returncode == 130, err.read_text()
