@@ -6,6 +6,7 @@ Importing the package never initialises Taichi, nor imports it: :class:`Scene`,
 initialises Taichi for the arch it is asked to run on.
 """
 import importlib
+import importlib.util
 
 from .scene import Scene
 from .scenefile import load_scene
@@ -19,10 +20,13 @@ _LAZY = {"Simulation": ".simulation", "State": ".state"}
 
 
 def __getattr__(name):
+    """The lazy public names, and submodules (``ts.simulation``) on first use."""
     if name in _LAZY:
         value = getattr(importlib.import_module(_LAZY[name], __name__), name)
         globals()[name] = value
         return value
+    if not name.startswith("_") and importlib.util.find_spec(f"{__name__}.{name}"):
+        return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

@@ -92,7 +92,8 @@ def build_parser():
     _add_run_arguments(sub.add_parser("run", help="simulate a scene, write OUT.mp4 and OUT.csv",
                                       formatter_class=_HelpFormatter))
     info = sub.add_parser("info", formatter_class=_HelpFormatter,
-                          help="validate a scene; show what it compiles in and the work a run needs")
+                          help="validate a scene; show what it compiles in and the work a "
+                               "run needs")
     info.add_argument("scene")
     info.add_argument("--arch", default="cpu", choices=ARCHS, help="where the kernels would run")
     info.add_argument("--calibrate", action="store_true",

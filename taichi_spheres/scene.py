@@ -14,7 +14,8 @@ import numpy as np
 
 __all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE", "RESTITUTION_MODELS", "MIN_STEP_ULPS",
            "OVERFLOW_HEADROOM", "largest_speed", "smallest_radius", "fall_speed",
-           "speed_problem", "radius_problem", "mass_problem", "gravity_problem"]
+           "speed_problem", "radius_problem", "mass_problem", "gravity_problem",
+           "vector_text"]
 
 #: Pair restitution models: "normal" (default) and "smid" (the seed's rule).
 RESTITUTION_MODELS = ("normal", "smid")
@@ -224,6 +225,11 @@ def smallest_radius(precision: str, lo, hi, step_fraction: float = 1.0) -> float
     return MIN_STEP_ULPS * ulp / step_fraction
 
 
+def vector_text(values) -> str:
+    """Three numbers as "[0, 0, -9.81]"."""
+    return f"[{', '.join(f'{float(c):g}' for c in values)}]"
+
+
 def fall_speed(gravity, lo, hi) -> float:
     """Speed [m/s] gravity [m/s^2] gives a sphere falling across the box [lo, hi] [m]
     along every axis: sqrt(2 sum_a |g_a| (hi_a - lo_a))."""
@@ -277,7 +283,7 @@ def gravity_problem(precision: str, gravity, speed: float) -> str | None:
     g = math.hypot(*(float(c) for c in gravity))
     if speed <= limit and g <= limit ** 2:
         return None
-    return (f"gravity [{', '.join(f'{g:g}' for g in gravity)}] m/s^2 overflows {precision}: it gives "
+    return (f"gravity {vector_text(gravity)} m/s^2 overflows {precision}: it gives "
             f"spheres speeds up to {speed:.3g} m/s, and {precision} holds at most "
             f"{limit:.2g} m/s")
 

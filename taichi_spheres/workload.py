@@ -20,7 +20,8 @@ import time
 
 import numpy as np
 
-from .scene import fall_speed, gravity_problem, mass_problem, radius_problem, speed_problem
+from .scene import (fall_speed, gravity_problem, mass_problem, radius_problem, speed_problem,
+                    vector_text)
 
 __all__ = ["MAX_STEPS", "Workload", "estimate", "frame_count", "precision_problems",
            "refusal", "model_step_seconds", "measure_step_seconds", "rough_duration"]
@@ -142,7 +143,7 @@ def refusal(work: Workload) -> str | None:
         cause = (f"{work.frames} frames ([run] fps x duration), and every frame ends a step",
                  "lower [run] fps (or --fps)")
     elif work.by_gravity:
-        cause = (f"gravity [{', '.join(f'{g:g}' for g in work.gravity)}] m/s^2 speeds spheres up to "
+        cause = (f"gravity {vector_text(work.gravity)} m/s^2 speeds spheres up to "
                  f"{work.v_top:.2g} m/s within {work.duration:g} s",
                  "check the units of [physics] gravity (m/s^2)")
     else:

@@ -243,9 +243,12 @@ def test_help_and_info_print_no_taichi_banner(tmp_path):
     assert "(default: out/<scene name>.mp4)\n" in r.stdout.replace("\n" + " " * 24, " ")
     code = ("import sys, contextlib, io\nimport taichi_spheres as ts, taichi_spheres.cli as c\n"
             "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
-            "    c.main(['run', '--help'])\nprint('taichi' in sys.modules, ts.Scene.__name__)")
+            "    c.main(['run', '--help'])\nprint('taichi' in sys.modules, ts.Scene.__name__)\n"
+            "print(ts.Simulation is ts.simulation.Simulation, ts.State.__name__, "
+            "sorted(set(ts.__all__) - set(dir(ts))))")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert r.stdout.split() == ["False", "Scene"], r.stderr
+    ours = [line for line in r.stdout.splitlines() if not line.startswith("[Taichi]")]
+    assert ours == ["False Scene", "True State []"], r.stdout + r.stderr
     r = cli("info", seed_five(tmp_path), cwd=tmp_path, timeout=120)
     assert r.returncode == 0 and r.stdout.startswith("scene: seed_five"), r.stdout + r.stderr
     assert "work: about 1.2e+04 steps" in r.stdout and "wall time: about" in r.stdout
@@ -269,7 +272,8 @@ def test_runs_beyond_the_work_limit_are_refused(tmp_path, old, new, words):
 
 @pytest.mark.parametrize("new, args, words", [
     ("v = [1e300, 0.8, 1.0]", [], ["speed of sphere 0 (1e+300 m/s) overflows f64"]),
-    ("v = [1e19, 0.8, 1.0]", ["--precision", "f32"], ["speed of sphere 0 (1e+19 m/s) overflows f32"]),
+    ("v = [1e19, 0.8, 1.0]", ["--precision", "f32"],
+     ["speed of sphere 0 (1e+19 m/s) overflows f32"]),
 ])
 def test_speeds_the_precision_cannot_hold_exit_2(tmp_path, new, args, words):
     r = cli("run", seed_five(tmp_path, ("v = [1.5, 0.8, 1.0]", new)), "--no-video", "--quiet",

@@ -908,7 +908,8 @@ def test_colour_outside_zero_to_one_is_an_error(tmp_path, where, text):
 
 
 def test_colour_inside_zero_to_one_is_kept(tmp_path):
-    s = ts.load_scene(write(tmp_path, GOOD.replace("mass = 2.0", "mass = 2.0\ncolour = [1, 0, 0.5]")))
+    text = GOOD.replace("mass = 2.0", "mass = 2.0\ncolour = [1, 0, 0.5]")
+    s = ts.load_scene(write(tmp_path, text))
     np.testing.assert_array_equal(s.meta["group_colours"][0], [1.0, 0.0, 0.5])
 
 
