@@ -130,7 +130,7 @@ def precision_problems(scene, precision: str, work: Workload) -> list:
                 radius_problem(precision, scene.radius, scene.box_lo, scene.box_hi,
                                work.step_fraction),
                 mass_problem(precision, scene.mass)]
-    if any(work.gravity):
+    if work.by_gravity:       # else the fastest sphere's own speed is the problem, if any
         problems.append(gravity_problem(precision, work.gravity, work.v_top))
     return [p for p in problems if p]
 

@@ -273,7 +273,7 @@ def test_runs_beyond_the_work_limit_are_refused(tmp_path, old, new, words):
 @pytest.mark.parametrize("new, args, words", [
     ("v = [1e300, 0.8, 1.0]", [], ["speed of sphere 0 (1e+300 m/s) overflows f64"]),
     ("v = [1e19, 0.8, 1.0]", ["--precision", "f32"],
-     ["speed of sphere 0 (1e+19 m/s) overflows f32"]),
+     ["error: speed of sphere 0 (1e+19 m/s) overflows f32", "at most 1.2e+18 m/s\n"]),
 ])
 def test_speeds_the_precision_cannot_hold_exit_2(tmp_path, new, args, words):
     r = cli("run", seed_five(tmp_path, ("v = [1.5, 0.8, 1.0]", new)), "--no-video", "--quiet",
