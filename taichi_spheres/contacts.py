@@ -37,6 +37,9 @@ from .state import Features, SphereState
 from .walls import Motion
 
 
+#: Most colours a grid can have: 3 per axis (an odd periodic axis).
+MAX_COLOURS = 27
+
 #: Below this many pending pairs a CPU sweep runs its loops serially.
 FEW_PAIRS = 1000
 #: Below this many, a CPU sweep still resolves serially (one launch for all colours:
@@ -139,59 +142,62 @@ class Contacts:
         self.motion = motion
         self.f = features
         self.real = state.real
-        self.n = state.n
         self.serial_light = serial_light
         self.serial_heavy = serial_heavy
         # only worth a second compiled variant where the loops are otherwise parallel
         self.serial_few = serial_few and not serial_heavy
-        # the box size is baked into the kernels (each Simulation compiles its own)
-        self.box_size = tuple(float(hi - lo) for lo, hi in zip(state.box_lo, state.box_hi))
         eps = float(np.finfo(np.float64 if self.real == ti.f64 else np.float32).eps)
         self.approach_eps = 8.0 * eps
-        # round-off allowance of the cells a walk skips (examine_around) [m]: positions
-        # and cell faces carry a few eps of the largest coordinate
-        extent = max(max(abs(a), abs(b)) for a, b in zip(state.box_lo, state.box_hi))
-        self.walk_margin = 64.0 * eps * (extent + max(grid.geom.cell))
-        self.active = ti.field(ti.i32, shape=grid.m)
+        cells = grid.cell_capacity
+        cap = state.capacity
+        self.active = ti.field(ti.i32, shape=cells)
         # the first pairs the detection counted for a cell (all of them when it found
         # at most RECORDED_PAIRS), oriented as the forward scan meets them
-        self.cell_pairs = ti.Vector.field(2, ti.i32, shape=(grid.m, RECORDED_PAIRS))
+        self.cell_pairs = ti.Vector.field(2, ti.i32, shape=(cells, RECORDED_PAIRS))
         # stencils as small tables walked by runtime loops (unrolling them multiplies
         # compile time)
         self.fwd_rows = ti.Vector.field(4, ti.i32, shape=len(FORWARD_ROWS))
         self.fwd_rows.from_numpy(np.array(FORWARD_ROWS, dtype=np.int32))
         self.block = ti.Vector.field(3, ti.i32, shape=(len(BLOCK_PAIRS), 2))
         self.block.from_numpy(np.array(BLOCK_PAIRS, dtype=np.int32))
-        self.colours = grid.geom.colours
-        self.axis_colours = tuple(len(grid.geom.axis_colours(a)) for a in range(3))
+        self.colours = ()
+        # colours per axis (1-3) and 1 where the last cell of an odd periodic axis has
+        # a colour of its own (see colour_index), of the bound geometry
+        self.axis_colours = ti.Vector.field(3, ti.i32, shape=())
+        self.odd_last = ti.Vector.field(3, ti.i32, shape=())
         # compact lists, so that sweeps cost O(pairs) and not O(N + cells): the cells
         # with pending pairs, and the spheres a sweep touched (order is thread-dependent,
         # but every use is order-independent: disjoint blocks, per-sphere updates)
-        self.active_list = ti.field(ti.i32, shape=grid.m)
+        self.active_list = ti.field(ti.i32, shape=cells)
         self.n_active = ti.field(ti.i32, shape=())
         # the listed cells sorted by colour (bucket_by_colour), and where each starts
-        self.by_colour = ti.field(ti.i32, shape=grid.m)
-        self.colour_start = ti.field(ti.i32, shape=len(self.colours) + 1)
-        self.colour_fill = ti.field(ti.i32, shape=len(self.colours))
-        self.touched = ti.field(ti.i32, shape=self.n)
-        self.marked = ti.field(ti.i32, shape=self.n)
+        self.by_colour = ti.field(ti.i32, shape=cells)
+        self.colour_start = ti.field(ti.i32, shape=MAX_COLOURS + 1)
+        self.colour_fill = ti.field(ti.i32, shape=MAX_COLOURS)
+        self.touched = ti.field(ti.i32, shape=cap)
+        self.marked = ti.field(ti.i32, shape=cap)
         # per sphere, the earliest contact (largest time since contact) among its pairs
         # found by the last detection: a pair is collided only when it is the earliest
         # contact of both its spheres, so colours do not reorder one sphere's collisions
-        self.earliest = ti.field(self.real, shape=self.n)
+        self.earliest = ti.field(self.real, shape=cap)
         self.n_touched = ti.field(ti.i32, shape=())
+        # scene values the kernels read (bind): half the common mass [kg] (equal
+        # masses), the reach of a pruned walk beyond r_i (r_max + round-off margin) [m]
+        self.half_m0 = ti.field(self.real, shape=())
+        self.walk_reach = ti.field(self.real, shape=())
         self.debug_pairs = None     # allocated by list_overlaps (tests only)
-        self.near_reach, allowance = near_allowance(grid.geom, state.r_max)
-        self.near_lists = near_lists and allowance > 0
+        self.near_lists = near_lists
         self.near_ready = False     # a full scan made a complete list (Python's copy)
         if self.near_lists:
-            self.near_allowance2 = allowance * allowance
+            # squared reach and allowance of the lists [m^2] (bind)
+            self.near_reach2 = ti.field(self.real, shape=())
+            self.near_allowance2 = ti.field(self.real, shape=())
             # indexed by the grid slot the sphere had when its list was made, so that
             # the scan writes them in order
-            self.near_id = ti.field(ti.i32, shape=self.n)
-            self.near = ti.field(ti.i32, shape=(self.n, NEAR_CAPACITY))
-            self.n_near = ti.field(ti.i32, shape=self.n)
-            self.x_near = ti.Vector.field(3, self.real, shape=self.n)
+            self.near_id = ti.field(ti.i32, shape=cap)
+            self.near = ti.field(ti.i32, shape=(cap, NEAR_CAPACITY))
+            self.n_near = ti.field(ti.i32, shape=cap)
+            self.x_near = ti.Vector.field(3, self.real, shape=cap)
             self.near_ok = ti.field(ti.i32, shape=())
 
         # hot kernels as plain closures: a data_oriented method kernel pays ~40 us of
@@ -251,6 +257,31 @@ class Contacts:
         self.sweep_mixed = sweep_mixed
         self.after_sweep_parallel = after_sweep_parallel
 
+    def bind(self, scene, geom):
+        """Load what the kernels read of a scene and its grid geometry ``geom`` (after
+        state.bind and grid.bind); forget the near lists and any pending pairs."""
+        self.n = scene.n
+        self.colours = geom.colours
+        self.axis_colours[None] = [len(geom.axis_colours(a)) for a in range(3)]
+        self.odd_last[None] = [int(p and d % 2 == 1) for p, d in zip(geom.periodic, geom.dims)]
+        self.half_m0[None] = 0.5 * float(scene.mass[0])
+        # round-off allowance of the cells a walk skips (examine_around) [m]: positions
+        # and cell faces carry a few eps of the largest coordinate
+        eps = self.approach_eps / 8.0
+        extent = max(max(abs(a), abs(b)) for a, b in zip(scene.box_lo, scene.box_hi))
+        r_max = float(scene.radius.max())
+        self.walk_reach[None] = r_max + 64.0 * eps * (extent + max(geom.cell))
+        self.near_reach, allowance = near_allowance(geom, r_max)
+        if self.near_lists:
+            if not allowance > 0:
+                raise ValueError("near lists need cells wider than the largest diameter")
+            self.near_reach2[None] = self.near_reach ** 2
+            self.near_allowance2[None] = allowance * allowance
+        self.near_ready = False
+        self.active.fill(0)
+        self.n_active[None] = 0
+        self.n_touched[None] = 0
+
     # ---- pair geometry and physics ----
     @ti.func
     def separation(self, i, j):
@@ -268,9 +299,10 @@ class Contacts:
         """Difference d of two positions [m], shifted to its minimum image on periodic
         axes. Positions stay within about one box length of each other, so one
         compare-and-shift does (no division in the hot loop)."""
+        box = self.params.size[None]
         for a in ti.static(range(3)):
             if ti.static(not self.f.wall_axes[a]):
-                size = ti.cast(ti.static(self.box_size[a]), self.real)
+                size = box[a]
                 if d[a] > 0.5 * size:
                     d[a] -= size
                 elif d[a] < -0.5 * size:
@@ -283,9 +315,13 @@ class Contacts:
         return self.state.v[i] - self.state.v[j]
 
     @ti.func
-    def approaching(self, dd, du, uu):
-        """d.u < 0 beyond round-off (relative to |d||u|)."""
-        return du < -ti.cast(ti.static(self.approach_eps), self.real) * ti.sqrt(dd * uu)
+    def approaching(self, dd, du, uu, ss):
+        """d.u < 0 beyond round-off: relative to |d| times the velocities' scale,
+        sqrt(|u|^2 + |v_i|^2 + |v_j|^2) (ss = |v_i|^2 + |v_j|^2 [m^2/s^2]). The speeds
+        count too: after a perfectly inelastic collision of spheres in motion the
+        relative velocity is round-off of their speeds, pointing anywhere, and must not
+        count as an approach (it would be collided again and again)."""
+        return du < -ti.cast(ti.static(self.approach_eps), self.real) * ti.sqrt(dd * (uu + ss))
 
     @ti.func
     def resting(self, i, j):
@@ -298,11 +334,11 @@ class Contacts:
         return out
 
     @ti.func
-    def approaching_pair(self, i, j, dd, du, uu):
+    def approaching_pair(self, i, j, dd, du, uu, ss):
         """approaching(), and for a resting contact (see resting()) faster than
         REST_TOLERANCE x the rest speed: a slower one is left alone (it closes the gap by
         less than that speed x h per step; gravity makes it faster by g h in the next)."""
-        out = self.approaching(dd, du, uu)
+        out = self.approaching(dd, du, uu, ss)
         if ti.static(self.f.rest_rule):
             if out and self.resting(i, j):
                 out = du * du > ti.static(REST_TOLERANCE ** 2) * self.params.rest_speed[None] ** 2 * dd
@@ -325,13 +361,14 @@ class Contacts:
         h = self.params.h[None]
         out = ti.cast(-1, self.real)
         if uu > 0:
+            ss = self.state.v[i].norm_sqr() + self.state.v[j].norm_sqr()
             c = sigma * sigma - dd
             s = c / (ti.sqrt(du * du + uu * c) - du)
-            if self.approaching_pair(i, j, dd, du, uu):
+            if self.approaching_pair(i, j, dd, du, uu, ss):
                 out = ti.min(s, h)
             elif s <= h:
                 dc = d - u * s
-                if self.approaching(dc.norm_sqr(), dc.dot(u), uu):
+                if self.approaching(dc.norm_sqr(), dc.dot(u), uu, ss):
                     out = s
         return out
 
@@ -373,7 +410,7 @@ class Contacts:
                 rest = rest or (-un < self.params.rest_speed[None] and self.resting(i, j))
             wi = ti.cast(0.5, self.real)
             wj = ti.cast(0.5, self.real)
-            meff = ti.cast(ti.static(0.5 * self.state.m0), self.real)
+            meff = self.half_m0[None]
             if ti.static(not self.f.equal_masses):
                 imi = self.state.inv_mass_of(i)
                 imj = self.state.inv_mass_of(j)
@@ -471,7 +508,7 @@ class Contacts:
         if a sphere moved farther than the grid's slack since the grid was built (the
         grid must be rebuilt before the next sweep). Decode with :func:`decode_status`."""
         far = 0
-        if self.params.vals[MOVED] > ti.cast(ti.static(self.grid.geom.slack), self.real):
+        if self.params.vals[MOVED] > self.grid.slack[None]:
             far = 1
         return 2 * self.params.count[REMAINING] + far
 
@@ -528,7 +565,7 @@ class Contacts:
         self.params.vals[MOVED] = 0
         self.clear_active(ti.static(self.serial_light))
         ti.loop_config(serialize=ti.static(self.serial_light))
-        for i in range(self.n):
+        for i in range(self.state.n_spheres[None]):
             self.earliest[i] = -1
             self.marked[i] = 0      # (slots; normally clear: after an interrupted sweep)
         self.n_touched[None] = 0
@@ -550,7 +587,7 @@ class Contacts:
         near_reach and its position."""
         keep = ti.static(self.near_lists and not record)
         ti.loop_config(serialize=ti.static(self.serial_heavy))
-        for p in range(self.n):
+        for p in range(self.state.n_spheres[None]):
             i = self.grid.order[p]
             ci = self.grid.coords(self.grid.cell_of[i])
             xi = self.grid.xs[p]
@@ -580,7 +617,7 @@ class Contacts:
         than near_reach (dd = squared distance [m^2]); returns the new count (past
         NEAR_CAPACITY: the list is incomplete, the pair is not stored)."""
         out = kept
-        if dd < ti.static(self.near_reach ** 2):
+        if dd < self.near_reach2[None]:
             if kept < NEAR_CAPACITY:
                 self.near[p, kept] = self.grid.order[q]
             out += 1
@@ -592,10 +629,10 @@ class Contacts:
         """Mark (as touched) every sphere that moved farther than the allowance
         (minimum image) since its near list was made (call at kernel top level)."""
         ti.loop_config(serialize=ti.static(self.serial_light))
-        for k in range(self.n):
+        for k in range(self.state.n_spheres[None]):
             i = self.near_id[k]
             d = self.min_image(self.state.x[i] - self.x_near[k])
-            if d.norm_sqr() > ti.cast(ti.static(self.near_allowance2), self.real):
+            if d.norm_sqr() > self.near_allowance2[None]:
                 self.mark_touched(i)
 
     @ti.func
@@ -603,7 +640,7 @@ class Contacts:
         """The near lists can serve this detection (after mark_fast_movers): complete
         when made, and few enough fast movers to scan around."""
         return self.near_ok[None] == 1 and \
-            self.n_touched[None] <= ti.static(self.n // NEAR_FAST_LIMIT)
+            self.n_touched[None] <= self.state.n_spheres[None] // NEAR_FAST_LIMIT
 
     @ti.func
     def scan_near(self, live):
@@ -614,7 +651,7 @@ class Contacts:
         examined against every neighbour afterwards (detect_around_touched)."""
         n = 0
         if live:
-            n = self.n
+            n = self.state.n_spheres[None]
         ti.loop_config(serialize=ti.static(self.serial_heavy))
         for k in range(n):
             i = self.near_id[k]
@@ -648,9 +685,9 @@ class Contacts:
         n_t = 0
         if live:
             n_t = self.n_touched[None]
-        dense = n_t > ti.static(self.n // DENSE_TOUCHED)   # (no i32 overflow)
+        dense = n_t > self.state.n_spheres[None] // DENSE_TOUCHED   # (no i32 overflow)
         if dense:
-            n_t = self.n
+            n_t = self.state.n_spheres[None]
         # one loop for both orders: a parallel loop costs its launch even when empty
         ti.loop_config(serialize=ti.static(self.serial_heavy or serial))
         for t in range(n_t):
@@ -678,8 +715,7 @@ class Contacts:
         lower = ti.Vector([1, 1, 1])
         upper = ti.Vector([1, 1, 1])
         if ti.static(PRUNE_WALKS):
-            reach = self.state.rad(i) + self.params.vals[MOVED] + \
-                ti.cast(ti.static(self.state.r_max + self.walk_margin), self.real)
+            reach = self.state.rad(i) + self.params.vals[MOVED] + self.walk_reach[None]
             lower, upper = self.grid.sides_within(self.min_image(xi - self.grid.corner(ci)), reach)
         for dx in range(-lower[0], upper[0] + 1):
             for dy in range(-lower[1], upper[1] + 1):
@@ -797,12 +833,15 @@ class Contacts:
         """Colour of cell c (vec3): parity per axis, 2 for the last cell of an odd
         periodic axis; numbered like GridGeometry.colours."""
         idx = 0
+        dims = self.grid.dims[None]
+        odd_last = self.odd_last[None]
+        per_axis = self.axis_colours[None]
         for a in ti.static(range(3)):
             ia = c[a] % 2
-            if ti.static(self.grid.geom.periodic[a] and self.grid.geom.dims[a] % 2 == 1):
-                if c[a] == ti.static(self.grid.geom.dims[a] - 1):
+            if ti.static(self.grid.periodic[a]):
+                if odd_last[a] == 1 and c[a] == dims[a] - 1:
                     ia = 2
-            idx = idx * ti.static(self.axis_colours[a]) + ia
+            idx = idx * per_axis[a] + ia
         return idx
 
     @ti.func
@@ -812,13 +851,13 @@ class Contacts:
         (order inside a colour is thread-dependent and irrelevant: its blocks are
         disjoint). Call at kernel top level (or where everything runs serially, as in
         the fused step)."""
-        for c in ti.static(range(len(self.colours) + 1)):
+        for c in ti.static(range(MAX_COLOURS + 1)):
             self.colour_start[c] = 0
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
         for t in range(self.n_active[None]):
             col = self.colour_index(self.grid.coords(self.active_list[t]))
             ti.atomic_add(self.colour_start[col + 1], 1)
-        for c in ti.static(range(len(self.colours))):
+        for c in ti.static(range(MAX_COLOURS)):
             self.colour_start[c + 1] += self.colour_start[c]
             self.colour_fill[c] = self.colour_start[c]
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
@@ -932,7 +971,7 @@ class Contacts:
         """Sorted (K, 2) int array of the overlapping approaching pairs that the
         detection scan finds (same code path as detect_all, recording instead)."""
         if self.debug_pairs is None:
-            self.debug_pairs = ti.Vector.field(2, ti.i32, shape=8 * self.n + 16)
+            self.debug_pairs = ti.Vector.field(2, ti.i32, shape=8 * self.state.capacity + 16)
             self.debug_count = ti.field(ti.i32, shape=())
 
             @ti.kernel

@@ -146,7 +146,12 @@ class GridGeometry:
 class Grid:
     """Counting-sort cell list over a :class:`SphereState`.
 
-    Fields (M = number of cells, N = spheres):
+    The fields hold up to ``cell_capacity`` cells; the geometry (cells per axis, cell
+    size, corner, slack) is data, loaded by :meth:`bind`, so that one compiled grid
+    serves every box with the same periodic axes (engine.py). Only which axes are
+    periodic is compiled in.
+
+    Fields (M = cells of the bound geometry, N = spheres):
         start: (M+1,) i32 — exclusive prefix of cell counts; sphere ids of cell c are
             ``order[start[c]:start[c+1]]``, sorted by id (deterministic on every arch)
         order: (N,) i32 sphere ids by cell;  cell_of: (N,) i32 linear cell of sphere
@@ -156,32 +161,43 @@ class Grid:
             i32 — where sphere i sits in ``order``. Whoever moves a sphere after the
             build must call :meth:`refresh` for it (or build again) before the next
             scan.
+        dims: () vec3 i32 cells per axis; cell: () vec3 real cell size [m]; lo, inv_cell:
+            () vec3 real box corner [m] and 1/cell [1/m]; n_cells: () i32 = M;
+            slack: () real [m] (GridGeometry); scan_size: (levels,) i32 items per level.
     """
 
-    def __init__(self, geom: GridGeometry, state: SphereState, serial_light: bool):
-        self.geom = geom
+    def __init__(self, cell_capacity: int, periodic: tuple, state: SphereState,
+                 serial_light: bool):
+        self.periodic = tuple(bool(p) for p in periodic)
         self.state = state
         self.real = state.real
-        self.n = state.n
-        self.m = geom.n_cells
+        self.cell_capacity = cell_capacity
+        self.geom = None
+        self.m = 0
         self.serial_light = serial_light
-        self.start = ti.field(ti.i32, shape=self.m + 1)
-        self.cursor = ti.field(ti.i32, shape=self.m)
-        self.order = ti.field(ti.i32, shape=self.n)
-        self.cell_of = ti.field(ti.i32, shape=self.n)
-        self.xs = ti.Vector.field(3, self.real, shape=self.n)
-        self.slot = ti.field(ti.i32, shape=self.n)
-        # multi-level blocked exclusive scan: level k scans sizes[k] items of bufs[k]
-        self.scan_sizes = [self.m]
+        cap = state.capacity
+        self.start = ti.field(ti.i32, shape=cell_capacity + 1)
+        self.cursor = ti.field(ti.i32, shape=cell_capacity)
+        self.order = ti.field(ti.i32, shape=cap)
+        self.cell_of = ti.field(ti.i32, shape=cap)
+        self.xs = ti.Vector.field(3, self.real, shape=cap)
+        self.slot = ti.field(ti.i32, shape=cap)
+        # multi-level blocked exclusive scan: level k scans scan_size[k] items of
+        # bufs[k]; as many levels as the capacity needs (a smaller grid leaves the top
+        # levels with one item)
+        self.scan_capacity = [cell_capacity]
         self.scan_bufs = [self.start]
-        while self.scan_sizes[-1] > SCAN_BLOCK:
-            size = -(-self.scan_sizes[-1] // SCAN_BLOCK)
-            self.scan_sizes.append(size)
+        while self.scan_capacity[-1] > SCAN_BLOCK:
+            size = -(-self.scan_capacity[-1] // SCAN_BLOCK)
+            self.scan_capacity.append(size)
             self.scan_bufs.append(ti.field(ti.i32, shape=size))
+        self.scan_size = ti.field(ti.i32, shape=len(self.scan_capacity))
         self.lo = ti.Vector.field(3, self.real, shape=())
         self.inv_cell = ti.Vector.field(3, self.real, shape=())
-        self.lo[None] = geom.lo
-        self.inv_cell[None] = [1.0 / c for c in geom.cell]
+        self.cell = ti.Vector.field(3, self.real, shape=())
+        self.dims = ti.Vector.field(3, ti.i32, shape=())
+        self.n_cells = ti.field(ti.i32, shape=())
+        self.slack = ti.field(self.real, shape=())
 
         # hot kernels as plain closures: a data_oriented method kernel pays ~40 us of
         # Python dispatch per launch for its `self` template argument
@@ -192,24 +208,50 @@ class Grid:
 
         self.build = build
 
+    def bind(self, geom: GridGeometry):
+        """Load the cell layout ``geom`` (at most cell_capacity cells, the periodic axes
+        this grid was compiled for)."""
+        if geom.n_cells > self.cell_capacity or tuple(geom.periodic) != self.periodic:
+            raise ValueError("grid geometry does not fit these fields")
+        self.geom = geom
+        self.m = geom.n_cells
+        self.lo[None] = geom.lo
+        self.inv_cell[None] = [1.0 / c for c in geom.cell]
+        self.cell[None] = list(geom.cell)
+        self.dims[None] = list(geom.dims)
+        self.n_cells[None] = geom.n_cells
+        self.slack[None] = geom.slack
+        size = geom.n_cells
+        for level in range(len(self.scan_capacity)):
+            self.scan_size[level] = size
+            size = -(-size // SCAN_BLOCK)
+
+    @property
+    def scan_sizes(self):
+        """Items per scan level of the bound geometry (Python ints)."""
+        return [int(self.scan_size[k]) for k in range(len(self.scan_capacity))]
+
     # ---- cell arithmetic (ti.func, all static in the geometry) ----
     @ti.func
     def coords_of_position(self, p):
         """Cell coordinates (vec3 i32) of a point p [m], clamped into the grid."""
         f = (p - self.lo[None]) * self.inv_cell[None]
+        dims = self.dims[None]
         c = ti.Vector([0, 0, 0])
         for a in ti.static(range(3)):
-            c[a] = ti.min(ti.max(ti.cast(ti.floor(f[a]), ti.i32), 0), ti.static(self.geom.dims[a] - 1))
+            c[a] = ti.min(ti.max(ti.cast(ti.floor(f[a]), ti.i32), 0), dims[a] - 1)
         return c
 
     @ti.func
     def linear(self, c):
-        return (c[0] * ti.static(self.geom.dims[1]) + c[1]) * ti.static(self.geom.dims[2]) + c[2]
+        dims = self.dims[None]
+        return (c[0] * dims[1] + c[1]) * dims[2] + c[2]
 
     @ti.func
     def coords(self, k):
-        nz = ti.static(self.geom.dims[2])
-        ny = ti.static(self.geom.dims[1])
+        dims = self.dims[None]
+        nz = dims[2]
+        ny = dims[1]
         return ti.Vector([k // (ny * nz), (k // nz) % ny, k % nz])
 
     @ti.func
@@ -217,9 +259,10 @@ class Grid:
         """Cell c + off (vec3 i32), wrapped on periodic axes; valid=False off the grid."""
         out = c + off
         valid = True
+        dims = self.dims[None]
         for a in ti.static(range(3)):
-            n = ti.static(self.geom.dims[a])
-            if ti.static(self.geom.periodic[a]):
+            n = dims[a]
+            if ti.static(self.periodic[a]):
                 if out[a] < 0:
                     out[a] += n
                 elif out[a] >= n:
@@ -239,11 +282,12 @@ class Grid:
         b1 = 0
         xy, ok = self.shifted(c, ti.Vector([row[0], row[1], 0]))
         if ok:
-            nz = ti.static(self.geom.dims[2])
-            base = (xy[0] * ti.static(self.geom.dims[1]) + xy[1]) * nz
+            dims = self.dims[None]
+            nz = dims[2]
+            base = (xy[0] * dims[1] + xy[1]) * nz
             z0 = c[2] + row[2]
             z1 = c[2] + row[3]
-            if ti.static(self.geom.periodic[2]):
+            if ti.static(self.periodic[2]):
                 if z0 < 0:
                     a1 = self.start[base + nz - 1]
                     b1 = self.start[base + nz]
@@ -263,7 +307,7 @@ class Grid:
     @ti.func
     def corner(self, c):
         """Lower corner of cell c (vec3 i32) [m]."""
-        return self.lo[None] + c * ti.Vector(ti.static(list(self.geom.cell)), dt=self.real)
+        return self.lo[None] + c * self.cell[None]
 
     @ti.func
     def sides_within(self, f, reach):
@@ -274,10 +318,11 @@ class Grid:
         it can reach after it moved."""
         lower = ti.Vector([0, 0, 0])
         upper = ti.Vector([0, 0, 0])
+        cell = self.cell[None]
         for a in ti.static(range(3)):
             if f[a] < reach:
                 lower[a] = 1
-            if f[a] > ti.cast(ti.static(self.geom.cell[a]), self.real) - reach:
+            if f[a] > cell[a] - reach:
                 upper[a] = 1
         return lower, upper
 
@@ -285,10 +330,11 @@ class Grid:
     def owner(self, ca, cb):
         """Component-wise lower cell of two equal-or-adjacent cells (periodic-aware)."""
         out = ca
+        dims = self.dims[None]
         for a in ti.static(range(3)):
             if ca[a] != cb[a]:
-                if ti.static(self.geom.periodic[a]):
-                    n = ti.static(self.geom.dims[a])
+                if ti.static(self.periodic[a]):
+                    n = dims[a]
                     if (ca[a] + 1) % n != cb[a]:
                         out[a] = cb[a]
                 elif cb[a] < ca[a]:
@@ -302,9 +348,10 @@ class Grid:
         cj - ci (wrapped into -1..1 on periodic axes) is lexicographically positive,
         or zero with q after p."""
         off = cj - ci
+        dims = self.dims[None]
         for a in ti.static(range(3)):
-            if ti.static(self.geom.periodic[a]):
-                n = ti.static(self.geom.dims[a])
+            if ti.static(self.periodic[a]):
+                n = dims[a]
                 if off[a] > 1:
                     off[a] -= n
                 elif off[a] < -1:
@@ -323,13 +370,13 @@ class Grid:
     def _exclusive_scan(self):
         """In-place exclusive prefix sum of start[0:M] (blocked, every arch)."""
         B = ti.static(SCAN_BLOCK)
-        levels = ti.static(len(self.scan_sizes))
+        levels = ti.static(len(self.scan_capacity))
         for lv in ti.static(range(levels - 1)):
             buf = ti.static(self.scan_bufs[lv])
             nxt = ti.static(self.scan_bufs[lv + 1])
-            size = ti.static(self.scan_sizes[lv])
-            ti.loop_config(serialize=ti.static(self.serial_light or self.scan_sizes[lv + 1] < 8))
-            for b in range(ti.static(self.scan_sizes[lv + 1])):
+            size = self.scan_size[lv]
+            ti.loop_config(serialize=ti.static(self.serial_light or self.scan_capacity[lv + 1] < 8))
+            for b in range(self.scan_size[lv + 1]):
                 acc = 0
                 for k in range(B):
                     idx = b * B + k
@@ -342,7 +389,7 @@ class Grid:
         ti.loop_config(serialize=True)
         for _ in range(1):
             acc = 0
-            for k in range(ti.static(self.scan_sizes[levels - 1])):
+            for k in range(self.scan_size[levels - 1]):
                 t = top[k]
                 top[k] = acc
                 acc += t
@@ -350,7 +397,7 @@ class Grid:
             buf = ti.static(self.scan_bufs[lv])
             nxt = ti.static(self.scan_bufs[lv + 1])
             ti.loop_config(serialize=ti.static(self.serial_light))
-            for idx in range(ti.static(self.scan_sizes[lv])):
+            for idx in range(self.scan_size[lv]):
                 buf[idx] += nxt[idx // B]
 
     @ti.func
@@ -361,22 +408,24 @@ class Grid:
 
         Also resets ``state.moved`` (distance moved since this build) to 0.
         """
+        n = self.state.n_spheres[None]
+        m = self.n_cells[None]
         ti.loop_config(serialize=ti.static(self.serial_light))
-        for c in range(self.m + 1):
+        for c in range(m + 1):
             self.start[c] = 0
         ti.loop_config(serialize=ti.static(self.serial_light))
-        for i in range(self.n):
+        for i in range(n):
             k = self.linear(self.coords_of_position(self.state.x[i]))
             self.cell_of[i] = k
             ti.atomic_add(self.start[k], 1)
             self.state.moved[i] = 0
         self._exclusive_scan()
         ti.loop_config(serialize=ti.static(self.serial_light))
-        for c in range(self.m):
+        for c in range(m):
             self.cursor[c] = self.start[c]
-        self.start[self.m] = self.n
+        self.start[m] = n
         ti.loop_config(serialize=ti.static(self.serial_light))
-        for i in range(self.n):
+        for i in range(n):
             slot = ti.atomic_add(self.cursor[self.cell_of[i]], 1)
             self.order[slot] = i
             if ti.static(self.serial_light):
@@ -385,7 +434,7 @@ class Grid:
                 self.xs[slot] = self.state.x[i]
         if ti.static(not self.serial_light):
             # atomics scatter in a thread-dependent order: sort each cell by sphere id
-            for c in range(self.m):
+            for c in range(m):
                 lo = self.start[c]
                 hi = self.start[c + 1]
                 for p in range(lo + 1, hi):

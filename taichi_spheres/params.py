@@ -55,7 +55,7 @@ class StepParams:
         projection iteration measured.
     """
 
-    def __init__(self, scene, real, rest_speed=0.0):
+    def __init__(self, real):
         self.real = real
         self.rest_speed = ti.field(real, shape=())
         self.up = ti.Vector.field(3, real, shape=())
@@ -68,15 +68,6 @@ class StepParams:
         self.e_wall = ti.field(real, shape=())
         self.count = Slots(ti.i32, N_COUNTS)
         self.vals = Slots(real, N_VALS)
-        self.gravity[None] = scene.gravity.tolist()
-        self.lo[None] = scene.box_lo.tolist()
-        self.hi[None] = scene.box_hi.tolist()
-        self.size[None] = (scene.box_hi - scene.box_lo).tolist()
-        self.e[None] = scene.restitution
-        self.e_wall[None] = scene.wall_restitution
-        self.rest_speed[None] = rest_speed
-        g = float(np.linalg.norm(scene.gravity))
-        self.up[None] = (-scene.gravity / g).tolist() if g > 0 else [0.0, 0.0, 0.0]
         # host copies the step reads back in one launch (to_numpy costs ~0.3 ms per
         # field on the CPU backend, a kernel with array arguments ~0.08 ms:
         # tools/launch_overhead.py)
@@ -92,6 +83,18 @@ class StepParams:
                 vals[k] = self.vals[k]
 
         self._copy_out = copy_out
+
+    def bind(self, scene, rest_speed=0.0):
+        """Load a scene's gravity, box, restitutions and the rest speed [m/s]."""
+        self.gravity[None] = scene.gravity.tolist()
+        self.lo[None] = scene.box_lo.tolist()
+        self.hi[None] = scene.box_hi.tolist()
+        self.size[None] = (scene.box_hi - scene.box_lo).tolist()
+        self.e[None] = scene.restitution
+        self.e_wall[None] = scene.wall_restitution
+        self.rest_speed[None] = rest_speed
+        g = float(np.linalg.norm(scene.gravity))
+        self.up[None] = (-scene.gravity / g).tolist() if g > 0 else [0.0, 0.0, 0.0]
 
     def read_back(self):
         """(count, vals) of this step as numpy arrays (count_host and vals_host, reused:

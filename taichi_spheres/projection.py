@@ -62,17 +62,17 @@ class Projection:
         self.motion = motion
         self.f = features
         self.real = state.real
-        self.n = state.n
         self.serial = serial
         self.tolerance = tolerance
         self.near_sets = NEAR_SETS
-        self.push = ti.Vector.field(3, self.real, shape=self.n)
-        self.rmax = ti.field(self.real, shape=self.n)
-        self.involved = ti.field(ti.i32, shape=self.n)
+        cap = state.capacity
+        self.push = ti.Vector.field(3, self.real, shape=cap)
+        self.rmax = ti.field(self.real, shape=cap)
+        self.involved = ti.field(ti.i32, shape=cap)
         self.n_involved = ti.field(ti.i32, shape=())
-        self.near = ti.field(ti.i32, shape=self.n)
+        self.near = ti.field(ti.i32, shape=cap)
         self.n_near = ti.field(ti.i32, shape=())
-        self.stamp = ti.field(ti.i32, shape=self.n)
+        self.stamp = ti.field(ti.i32, shape=cap)
         self.iteration = ti.field(ti.i32, shape=())
         self.worst = ti.field(self.real, shape=())
         self.pushed = ti.field(ti.i32, shape=())
@@ -104,7 +104,7 @@ class Projection:
         RELAXATION x their overlap, then put spheres back inside the box."""
         self._begin_iteration()
         ti.loop_config(serialize=ti.static(self.serial))
-        for p in range(self.n):
+        for p in range(self.state.n_spheres[None]):
             self.examine(self.grid.order[p])
         self._apply()
 
@@ -131,7 +131,7 @@ class Projection:
         iteration: the same value as a full scan would have measured in it)."""
         self.worst[None] = 0
         ti.loop_config(serialize=ti.static(self.serial))
-        for i in range(self.n):
+        for i in range(self.state.n_spheres[None]):
             ti.atomic_max(self.worst[None], self.rmax[i])
 
     @ti.func

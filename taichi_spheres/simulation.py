@@ -20,23 +20,20 @@ import numpy as np
 import taichi as ti
 from taichi.lang.util import to_numpy_type
 
+from . import engine as engines
 from . import runtime
-from .contacts import NEAR_CAPACITY, REST_TOLERANCE, Contacts, decode_status, near_allowance
-from .fused import FusedStep
-from .projection import DEFAULT_TOLERANCE, MAX_ITERATIONS, Projection
-from .grid import Grid, GridGeometry
+from .contacts import NEAR_CAPACITY, REST_TOLERANCE, decode_status, near_allowance
+from .projection import DEFAULT_TOLERANCE, MAX_ITERATIONS
+from .grid import GridGeometry
 from . import observe
 from .params import (E_PAIRS, E_REST, E_WALLS, FLOOR, MULTI, OPEN_OVERLAP, PAIRS, PROJ_WORST,
-                     PROJECTED, PROJECTED_PAIRS, REMAINING,
-                     RESTED, SEP_OVERLAP, SUPPORTED, VIRIAL, VMAX2, WALL_RESTED, WALL_RESTS,
-                     WALLS,
-                     StepParams)
+                     PROJECTED, PROJECTED_PAIRS, REMAINING, RESTED, SEP_OVERLAP, SUPPORTED,
+                     VIRIAL, VMAX2, WALL_RESTED, WALL_RESTS, WALLS)
 from .scene import Scene
-from .state import Features, SphereState, State
-from .walls import Motion
+from .state import Features, State
 
 __all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS", "rest_speed_for",
-           "REST_SPEED_FACTOR", "estimate_field_bytes"]
+           "REST_SPEED_FACTOR", "estimate_field_bytes", "field_bytes_for"]
 
 #: Default largest move per step as a fraction of the smallest radius. Two spheres
 #: then close in by at most 0.2 r per step, so a pair can only pass through each
@@ -75,20 +72,29 @@ def rest_speed_for(scene: Scene, step_fraction: float = DEFAULT_STEP_FRACTION) -
 
 def estimate_field_bytes(scene: Scene, precision: str = "f64",
                          step_fraction: float = DEFAULT_STEP_FRACTION) -> int:
-    """Device memory a Simulation of ``scene`` allocates for its Taichi fields [bytes],
+    """Device memory a Simulation of ``scene`` allocates for its Taichi fields [bytes]
+    when it builds a new engine (room for engine.capacity_for its spheres and cells),
     counted per sphere and per grid cell without initialising Taichi (``cli info``).
     tests/test_gas.py holds it to within 3 % of :meth:`Simulation.field_bytes`."""
     geom = GridGeometry.for_scene(scene, step_fraction)
     features = Features.from_scene(scene, rest_speed_for(scene, step_fraction))
+    return field_bytes_for(engines.capacity_for(scene.n, engines.MIN_SPHERES),
+                           engines.capacity_for(geom.n_cells, engines.MIN_CELLS), features,
+                           _keeps_near_lists(scene, geom), precision)
+
+
+def field_bytes_for(spheres: int, cells: int, features: Features, near_lists: bool,
+                    precision: str) -> int:
+    """Bytes of an engine's fields with room for ``spheres`` and ``cells`` [bytes]."""
     real = 8 if precision == "f64" else 4
     # x, v, grid.xs, projection push (4 vec3), moved, earliest, projection rmax; hits,
     # marked, touched, order, cell_of, slot, projection involved/near/stamp (+ support)
     per_sphere = 12 * real + 3 * real + 9 * 4 + (4 if features.supports else 0)
     per_sphere += (0 if features.equal_radii else real) + (0 if features.equal_masses else real)
-    if _keeps_near_lists(scene, geom):
+    if near_lists:
         per_sphere += (NEAR_CAPACITY + 2) * 4 + 3 * real   # near, near_id, n_near; x_near
     per_cell = 9 * 4   # start, cursor; active, cell_pairs (2 x 2), active_list, by_colour
-    return scene.n * per_sphere + geom.n_cells * per_cell
+    return spheres * per_sphere + cells * per_cell
 
 
 def _keeps_near_lists(scene: Scene, geom: GridGeometry) -> bool:
@@ -148,27 +154,20 @@ class Simulation:
         self.geometry = GridGeometry.for_scene(scene, step_fraction)
         self.runtime = runtime.ensure(arch, precision, threads)
         self.precision = self.runtime.precision
-        real = ti.f64 if self.precision == "f64" else ti.f32
-        n = scene.n
         cpu = self.runtime.is_cpu
-        serial_light = cpu and n < _SERIAL_LIGHT_BELOW
-        serial_heavy = cpu and n < _SERIAL_HEAVY_BELOW
-        self._state = SphereState(scene, self.features, real)
-        self._params = StepParams(scene, real, self.rest_speed)
-        self._motion = Motion(self._state, self._params, self.features, serial_light)
-        self._grid = Grid(self.geometry, self._state, serial_light)
-        self._contacts = Contacts(self._state, self._grid, self._params, self._motion,
-                                  self.features, serial_light, serial_heavy, serial_few=cpu,
-                                  near_lists=_keeps_near_lists(scene, self.geometry))
+        n = scene.n
+        key = engines.EngineKey(
+            generation=self.runtime.generation,
+            real=ti.f64 if self.precision == "f64" else ti.f32, features=self.features,
+            serial_light=cpu and n < _SERIAL_LIGHT_BELOW,
+            serial_heavy=cpu and n < _SERIAL_HEAVY_BELOW, serial_few=cpu,
+            near_lists=_keeps_near_lists(scene, self.geometry), tuning=engines.tuning())
+        self._engine = engines.acquire(key, n, self.geometry.n_cells)
+        self._parked = (scene.x, scene.v)
+        self._bind()
         self._overlap_tolerance = DEFAULT_TOLERANCE
-        self._projection = Projection(self._state, self._grid, self._contacts, self._motion,
-                                      self.features, serial_light, self._overlap_tolerance)
         # small CPU systems can run each step in one or two serial kernels (fused.py)
-        self._fused = None
-        if fused and self._contacts.serial_heavy:
-            self._fused = FusedStep(self._motion, self._grid, self._contacts,
-                                    self._projection, real, self.features.supports,
-                                    self._overlap_tolerance)
+        self._fused = self._engine.fused_step() if fused and key.serial_heavy else None
         self._r_min = float(scene.radius.min())
         self._g = float(np.linalg.norm(scene.gravity))
         self.time = 0.0
@@ -203,13 +202,12 @@ class Simulation:
         return self._overlap_tolerance
 
     def field_bytes(self) -> int:
-        """Bytes of the Taichi fields this Simulation allocated [bytes], from their
-        shapes and dtypes (state, parameters and their counters, motion, grid,
-        contacts, projection)."""
+        """Bytes of the Taichi fields this Simulation runs on [bytes], from their shapes
+        and dtypes (state, parameters and their counters, motion, grid, contacts,
+        projection): those of its engine (engine.py), sized for at least its spheres and
+        cells, shared with other Simulations of the same features."""
         seen, total = set(), 0
-        parts = (self._state, self._params, self._params.count, self._params.vals,
-                 self._motion, self._grid, self._contacts, self._projection)
-        for part in parts:
+        for part in engines.field_parts(self._engine):
             for value in vars(part).values():
                 for item in value if isinstance(value, (list, tuple)) else (value,):
                     if isinstance(item, ti.Field) and id(item) not in seen:
@@ -437,6 +435,42 @@ class Simulation:
         self._totals["projected_steps"] += 1
         return float(proj.worst[None])
 
+    # ---- the engine this Simulation runs on ----
+    def _bind(self):
+        """Load this Simulation into its engine's fields unless it is the one they hold."""
+        if not self._engine.bound_to(self):
+            x, v = self._parked
+            self._engine.bind(self, x, v, self.geometry, self.rest_speed)
+            self._parked = None
+
+    def _park(self):
+        """Keep positions and velocities on the host: another Simulation takes the engine."""
+        self._parked = self._engine.state.rows()
+
+    @property
+    def _state(self):
+        return self._engine.state
+
+    @property
+    def _params(self):
+        return self._engine.params
+
+    @property
+    def _motion(self):
+        return self._engine.motion
+
+    @property
+    def _grid(self):
+        return self._engine.grid
+
+    @property
+    def _contacts(self):
+        return self._engine.contacts
+
+    @property
+    def _projection(self):
+        return self._engine.projection
+
     # ---- introspection used by tests and tools ----
     def grid_overlaps(self) -> np.ndarray:
         """Rebuild the grid at the current state and list overlapping approaching pairs
@@ -446,4 +480,6 @@ class Simulation:
         return self._contacts.list_overlaps()
 
     def _check(self):
+        """Raise if Taichi was re-initialised since; bind this Simulation's engine."""
         runtime.check(self.runtime)
+        self._bind()

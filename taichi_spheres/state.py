@@ -100,7 +100,11 @@ class State:
 class SphereState:
     """Positions, velocities and per-sphere bookkeeping, one field per quantity (SoA).
 
-    Fields (N = number of spheres, real = f32 or f64):
+    Fields hold up to ``capacity`` spheres (so that Simulations of other sphere counts
+    can run on the same fields and compiled kernels: see engine.py); the scene bound
+    last (:meth:`bind`) uses the first n_spheres[None] of them.
+
+    Fields (N = capacity, real = f32 or f64):
         x, v: (N,) vec3 real — centre [m] and velocity [m/s]
         radius: (N,) real, only without equal radii [m]
         inv_mass: (N,) real, only without equal masses [1/kg]
@@ -108,46 +112,95 @@ class SphereState:
         hits: (N,) i32 — pair and wall collisions in the current step
         support: (N,) i32, only with features.supports — 1 when the sphere rests on
             the floor or on a supported sphere in the current step
+        n_spheres: () i32 — spheres of the bound scene
+        r0, m0: () real — the radius [m] and mass [kg] of every sphere when equal
     """
 
-    def __init__(self, scene: Scene, features: Features, real):
-        n = scene.n
-        self.n = n
+    def __init__(self, capacity: int, features: Features, real):
+        self.capacity = capacity
+        self.n = 0
         self.real = real
         self.features = features
-        self.r0 = float(scene.radius[0])
-        self.r_max = float(scene.radius.max())
-        self.m0 = float(scene.mass[0])
-        self.box_lo = tuple(float(c) for c in scene.box_lo)
-        self.box_hi = tuple(float(c) for c in scene.box_hi)
-        self.x = ti.Vector.field(3, real, shape=n)
-        self.v = ti.Vector.field(3, real, shape=n)
-        self.radius = None if features.equal_radii else ti.field(real, shape=n)
-        self.inv_mass = None if features.equal_masses else ti.field(real, shape=n)
-        self.moved = ti.field(real, shape=n)
-        self.hits = ti.field(ti.i32, shape=n)
-        self.support = ti.field(ti.i32, shape=n) if features.supports else None
-        self.load(scene.x, scene.v, scene.radius, scene.mass)
+        self.x = ti.Vector.field(3, real, shape=capacity)
+        self.v = ti.Vector.field(3, real, shape=capacity)
+        self.radius = None if features.equal_radii else ti.field(real, shape=capacity)
+        self.inv_mass = None if features.equal_masses else ti.field(real, shape=capacity)
+        self.moved = ti.field(real, shape=capacity)
+        self.hits = ti.field(ti.i32, shape=capacity)
+        self.support = ti.field(ti.i32, shape=capacity) if features.supports else None
+        self.n_spheres = ti.field(ti.i32, shape=())
+        self.r0 = ti.field(real, shape=())
+        self.m0 = ti.field(real, shape=())
+        np_real = np.float64 if real == ti.f64 else np.float32
+
+        @ti.kernel
+        def load_rows(x: ti.types.ndarray(dtype=real, ndim=2),
+                      v: ti.types.ndarray(dtype=real, ndim=2),
+                      radius: ti.types.ndarray(dtype=real, ndim=1),
+                      inv_mass: ti.types.ndarray(dtype=real, ndim=1)):
+            for i in range(self.n_spheres[None]):
+                for a in ti.static(range(3)):
+                    self.x[i][a] = x[i, a]
+                    self.v[i][a] = v[i, a]
+                if ti.static(not features.equal_radii):
+                    self.radius[i] = radius[i]
+                if ti.static(not features.equal_masses):
+                    self.inv_mass[i] = inv_mass[i]
+
+        @ti.kernel
+        def read_rows(x: ti.types.ndarray(dtype=real, ndim=2),
+                      v: ti.types.ndarray(dtype=real, ndim=2)):
+            for i in range(self.n_spheres[None]):
+                for a in ti.static(range(3)):
+                    x[i, a] = self.x[i][a]
+                    v[i, a] = self.v[i][a]
+
+        self._np_real = np_real
+        self._load_rows = load_rows
+        self._read_rows = read_rows
+
+    def bind(self, scene: Scene, x, v):
+        """Make ``scene`` (at most ``capacity`` spheres) the one the fields hold: its
+        sphere count, equal radius and mass, radii and masses, and the positions x [m]
+        and velocities v [m/s] ((n, 3) each)."""
+        if scene.n > self.capacity:
+            raise ValueError(f"{scene.n} spheres do not fit fields for {self.capacity}")
+        self.n = scene.n
+        self.n_spheres[None] = scene.n
+        self.r0[None] = float(scene.radius[0])
+        self.m0[None] = float(scene.mass[0])
+        self.load(x, v, scene.radius, scene.mass)
 
     def load(self, x, v, radius, mass):
-        np_real = np.float64 if self.real == ti.f64 else np.float32
-        self.x.from_numpy(np.ascontiguousarray(x, dtype=np_real))
-        self.v.from_numpy(np.ascontiguousarray(v, dtype=np_real))
-        if self.radius is not None:
-            self.radius.from_numpy(np.ascontiguousarray(radius, dtype=np_real))
-        if self.inv_mass is not None:
-            self.inv_mass.from_numpy(np.ascontiguousarray(1.0 / mass, dtype=np_real))
+        """Positions [m], velocities [m/s], radii [m] and masses [kg] of the bound scene's
+        spheres ((n, 3), (n, 3), (n,), (n,))."""
+        real = self._np_real
+        self._load_rows(np.ascontiguousarray(x, dtype=real), np.ascontiguousarray(v, dtype=real),
+                        np.ascontiguousarray(radius, dtype=real),
+                        np.ascontiguousarray(1.0 / np.asarray(mass, dtype=np.float64), dtype=real))
+
+    def _rows(self):
+        x = np.empty((self.n, 3), dtype=self._np_real)
+        v = np.empty((self.n, 3), dtype=self._np_real)
+        self._read_rows(x, v)
+        return x, v
 
     def positions(self) -> np.ndarray:
-        return self.x.to_numpy().astype(np.float64)
+        """(n, 3) float64 copy of the bound scene's positions [m]."""
+        return self._rows()[0].astype(np.float64)
 
     def velocities(self) -> np.ndarray:
-        return self.v.to_numpy().astype(np.float64)
+        """(n, 3) float64 copy of the bound scene's velocities [m/s]."""
+        return self._rows()[1].astype(np.float64)
+
+    def rows(self):
+        """(x, v) of the bound scene in the field precision, (n, 3) each."""
+        return self._rows()
 
     @ti.func
     def rad(self, i):
-        """Radius of sphere i [m] (a constant when all radii are equal)."""
-        r = ti.cast(ti.static(self.r0), self.real)
+        """Radius of sphere i [m] (one scalar when all radii are equal)."""
+        r = self.r0[None]
         if ti.static(not self.features.equal_radii):
             r = self.radius[i]
         return r
@@ -159,8 +212,8 @@ class SphereState:
 
     @ti.func
     def mass_of(self, i):
-        """Mass of sphere i [kg] (a constant when all masses are equal)."""
-        m = ti.cast(ti.static(self.m0), self.real)
+        """Mass of sphere i [kg] (one scalar when all masses are equal)."""
+        m = self.m0[None]
         if ti.static(not self.features.equal_masses):
             m = 1 / self.inv_mass[i]
         return m

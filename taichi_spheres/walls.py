@@ -40,7 +40,6 @@ class Motion:
         self.params = params
         self.f = features
         self.real = state.real
-        self.n = state.n
         self.serial_light = serial_light
 
         # hot kernels as plain closures: a data_oriented method kernel pays ~40 us of
@@ -238,7 +237,7 @@ class Motion:
         """
         self.params.reset_step()
         ti.loop_config(serialize=ti.static(self.serial_light))
-        for i in range(self.n):
+        for i in range(self.state.n_spheres[None]):
             h = self.params.h[None]
             self.state.hits[i] = 0
             if ti.static(self.f.supports):
@@ -256,5 +255,5 @@ class Motion:
     def _measure_vmax_body(self):
         """vals[VMAX2] = max |v|^2 over all spheres [m^2/s^2]."""
         self.params.vals[VMAX2] = 0
-        for i in range(self.n):
+        for i in range(self.state.n_spheres[None]):
             ti.atomic_max(self.params.vals[VMAX2], self.state.v[i].norm_sqr())

@@ -11,6 +11,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import bench  # noqa: E402  (tools/bench.py)
 from taichi_spheres import Simulation  # noqa: E402
+from taichi_spheres.simulation import _field_nbytes  # noqa: E402
 from taichi_spheres.builders import gas  # noqa: E402
 
 
@@ -36,6 +37,19 @@ def test_staged_step_is_the_step(arch, precision):
         assert all(t >= 0.0 for t in times.values())
 
 
+def _field_layout(sim) -> set:
+    """(part, field name, bytes per element) of the Taichi fields a Simulation runs on."""
+    import taichi as ti
+    from taichi_spheres.engine import field_parts
+    out = set()
+    for part in field_parts(sim._engine):
+        for name, value in vars(part).items():
+            if isinstance(value, ti.Field):
+                out.add((type(part).__name__, name, _field_nbytes(value) //
+                         max(1, int(np.prod(value.shape)))))
+    return out
+
+
 def test_one_feature_compiled_in_changes_nothing_but_code(arch):
     """Each single-flag build gives the states of the default build; a per-sphere radius
     field costs exactly one real per sphere."""
@@ -48,8 +62,12 @@ def test_one_feature_compiled_in_changes_nothing_but_code(arch):
         for _ in range(4):
             sim.step(sim.max_step())
         assert np.array_equal(sim.state().x, base.state().x), key
-        extra = sim.field_bytes() - base.field_bytes()
-        assert extra == (8 * scene.n if key == "radii" else 0), key
+        # the fields differ only by the radius field, one real per sphere of the engine
+        extra = _field_layout(sim) - _field_layout(base)
+        assert extra == ({("SphereState", "radius", 8)} if key == "radii" else set()), key
+        assert _field_layout(base) <= _field_layout(sim)
+        if key == "radii":
+            assert _field_nbytes(sim._state.radius) == 8 * sim._engine.capacity
 
 
 def test_rss_and_exponent():

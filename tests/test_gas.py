@@ -261,7 +261,9 @@ def test_parallel_colour_launches_give_the_serial_bits(arch, monkeypatch):
         sim = ts.Simulation(scene, arch=arch)
         launches = []
         per_colour = sim._contacts.resolve_colour_parallel
-        sim._contacts.resolve_colour_parallel = lambda k: (launches.append(k), per_colour(k))
+        # (restored at the end: the engine's kernels serve later Simulations)
+        monkeypatch.setattr(sim._contacts, "resolve_colour_parallel",
+                            lambda k, launch=per_colour: (launches.append(k), launch(k)))
         sim.advance(25 * sim.max_step())
         runs.append((sim.state(), sim.stats))
         assert bool(launches) == (force == "parallel" or arch != "cpu")
@@ -297,7 +299,14 @@ def test_memory_estimate_matches_the_fields(arch, precision, kind):
     sim = ts.Simulation(scene, arch=arch, precision=precision)
     actual = sim.field_bytes()
     real = 8 if precision == "f64" else 4
-    assert ts.simulation._field_nbytes(sim._state.x) == 3 * real * scene.n
-    assert actual > 2 * 3 * real * scene.n
-    estimate = ts.simulation.estimate_field_bytes(scene, precision)
+    engine = sim._engine      # may be an earlier Simulation's, with room for more
+    assert engine.capacity >= scene.n and engine.cell_capacity >= sim.geometry.n_cells
+    assert ts.simulation._field_nbytes(sim._state.x) == 3 * real * engine.capacity
+    assert actual > 2 * 3 * real * engine.capacity
+    estimate = ts.simulation.field_bytes_for(engine.capacity, engine.cell_capacity,
+                                             sim.features, engine.key.near_lists, precision)
     assert abs(estimate / actual - 1) < 0.03, (kind, estimate, actual)
+    fresh = (ts.engine.capacity_for(scene.n, ts.engine.MIN_SPHERES),
+             ts.engine.capacity_for(sim.geometry.n_cells, ts.engine.MIN_CELLS))
+    if (engine.capacity, engine.cell_capacity) == fresh:
+        assert estimate == ts.simulation.estimate_field_bytes(scene, precision)

@@ -66,7 +66,9 @@ def test_parallel_colour_launches_give_the_stored_digest(arch, monkeypatch):
     digest, sim = _digest("large", "f64")
     launches = []
     per_colour = sim._contacts.resolve_colour_parallel
-    sim._contacts.resolve_colour_parallel = lambda k: (launches.append(k), per_colour(k))
+    # (restored at the end: the engine's kernels serve later Simulations)
+    monkeypatch.setattr(sim._contacts, "resolve_colour_parallel",
+                        lambda k, launch=per_colour: (launches.append(k), launch(k)))
     sim.advance(sim.max_step())
     assert launches, "the sweeps did not launch per colour"
     assert digest == STORED["large"]["digests"]["f64"]
@@ -75,3 +77,27 @@ def test_parallel_colour_launches_give_the_stored_digest(arch, monkeypatch):
 def test_fast_math_stays_off():
     """Taichi's fast math makes the bits depend on the CPU model and compile mode."""
     assert runtime.FAST_MATH is False
+
+
+def test_simulations_share_an_engine_and_keep_their_bits(arch, precision):
+    """A later Simulation with the same compiled features and no more spheres runs on
+    the earlier one's engine (compiles nothing: tools/compile_once.py), also when both
+    stay alive: stepping two of them in turn gives each the bits it gets alone."""
+    big = same_bits_scene(300)
+    small = same_bits_scene(200)
+    alone = ts.Simulation(big, arch=arch, precision=precision)
+    for _ in range(4):
+        alone.advance(0.05)
+    a = ts.Simulation(big, arch=arch, precision=precision)
+    b = ts.Simulation(small, arch=arch, precision=precision)
+    assert a._engine is alone._engine and b._engine is a._engine
+    b_alone = ts.Simulation(small, arch=arch, precision=precision)
+    for _ in range(4):
+        b_alone.advance(0.05)
+    for _ in range(4):
+        a.advance(0.05)
+        b.advance(0.05)
+    for sim, ref in ((a, alone), (b, b_alone)):
+        assert ts.observe.state_digest(sim.state(), precision) == \
+            ts.observe.state_digest(ref.state(), precision)
+        assert sim.stats["pair_collisions"] == ref.stats["pair_collisions"] > 100

@@ -1,0 +1,163 @@
+"""Compiled engines, shared by the Simulations of one process: kernels compile once.
+
+Taichi compiles a kernel for the fields it touches. An :class:`Engine` is one set of
+fields (state, parameters, grid, contacts, projection) with the kernels over them; the
+scene's numbers (sphere count, box, cell layout, radii, masses, restitution, gravity)
+are data in those fields, and only what changes the code is compiled in: the
+features (``state.Features``), the serial/parallel loop variants chosen by the
+sphere count, near lists, and the engine's tuning constants. A Simulation asks the
+pool for an engine with its key and room for its spheres and cells; a later
+Simulation with the same key and no more spheres or cells runs on the same engine
+and compiles nothing (``tools/compile_once.py`` measures it).
+
+Several live Simulations may share one engine: the one that runs binds the engine
+(:meth:`Engine.bind`) and the one it replaces parks its positions and velocities on
+the host first (exact copies). Everything else an engine's fields hold is rebuilt by
+every step, so a Simulation gives the same bits whichever others ran in between.
+
+The pool lives as long as the Taichi runtime: a re-initialisation (other arch,
+precision, thread count or compile mode) empties it.
+"""
+from __future__ import annotations
+
+import dataclasses
+import weakref
+
+from . import contacts, grid, projection, walls
+from .contacts import Contacts
+from .fused import FusedStep
+from .grid import Grid, GridGeometry
+from .params import StepParams
+from .projection import DEFAULT_TOLERANCE, Projection
+from .state import Features, SphereState
+from .walls import Motion
+
+__all__ = ["EngineKey", "Engine", "acquire", "capacity_for", "tuning"]
+
+
+def tuning() -> tuple:
+    """The module constants the kernels compile in (contacts, projection, walls, grid),
+    as (name, value) pairs: an engine built with other values is another engine."""
+    names = {contacts: ("SUPPORT_COS", "REST_TOLERANCE", "COLLAPSE_HITS", "MAX_BLOCK_COLLISIONS",
+                        "RECORDED_PAIRS", "DENSE_TOUCHED", "NEAR_CAPACITY", "NEAR_FAST_LIMIT",
+                        "PRUNE_WALKS"),
+             projection: ("DEFAULT_TOLERANCE", "MAX_ITERATIONS", "RELAXATION", "NEAR_SETS"),
+             walls: ("MAX_WALL_BOUNCES",), grid: ("SCAN_BLOCK",)}
+    return tuple((f"{m.__name__}.{k}", getattr(m, k)) for m, ks in names.items() for k in ks)
+
+
+@dataclasses.dataclass(frozen=True)
+class EngineKey:
+    """What an engine's kernels compile in: the Taichi runtime it was built on
+    (runtime.Runtime.generation: arch, precision, threads, compile mode), the scene's
+    features, the loop variants (serial_light: cheap loops serial; serial_heavy:
+    detection and sweeps serial; serial_few: a serial sweep variant for few pairs),
+    near lists, and the tuning constants."""
+
+    generation: int
+    real: object
+    features: Features
+    serial_light: bool
+    serial_heavy: bool
+    serial_few: bool
+    near_lists: bool
+    tuning: tuple
+
+
+class Engine:
+    """Fields and kernels for up to ``capacity`` spheres and ``cell_capacity`` cells.
+
+    Parts: state (SphereState), params (StepParams), motion (Motion), grid (Grid),
+    contacts (Contacts), projection (Projection), and the fused step
+    (:meth:`fused_step`, built on first use)."""
+
+    def __init__(self, key: EngineKey, capacity: int, cell_capacity: int):
+        self.key = key
+        self.capacity = capacity
+        self.cell_capacity = cell_capacity
+        f = key.features
+        self.state = SphereState(capacity, f, key.real)
+        self.params = StepParams(key.real)
+        self.motion = Motion(self.state, self.params, f, key.serial_light)
+        periodic = tuple(not w for w in f.wall_axes)
+        self.grid = Grid(cell_capacity, periodic, self.state, key.serial_light)
+        self.contacts = Contacts(self.state, self.grid, self.params, self.motion, f,
+                                 key.serial_light, key.serial_heavy,
+                                 serial_few=key.serial_few, near_lists=key.near_lists)
+        self.projection = Projection(self.state, self.grid, self.contacts, self.motion, f,
+                                     key.serial_light, DEFAULT_TOLERANCE)
+        self._fused = None
+        self._occupant = None      # weakref to the Simulation bound last
+
+    def fits(self, n: int, n_cells: int) -> bool:
+        return n <= self.capacity and n_cells <= self.cell_capacity
+
+    def fused_step(self) -> FusedStep:
+        """The fused step over this engine's parts (compiled on its first launch)."""
+        if self._fused is None:
+            self._fused = FusedStep(self.motion, self.grid, self.contacts, self.projection,
+                                    self.key.real, self.key.features.supports,
+                                    self.projection.tolerance)
+        return self._fused
+
+    def bound_to(self, sim) -> bool:
+        return self._occupant is not None and self._occupant() is sim
+
+    def bind(self, sim, x, v, geom: GridGeometry, rest_speed: float) -> None:
+        """Make ``sim`` the Simulation these fields hold: park the previous one's
+        positions and velocities on the host (its ``_park``), then load ``sim``'s scene,
+        x, v [(n, 3)], grid geometry and rest speed [m/s]."""
+        previous = self._occupant() if self._occupant is not None else None
+        if previous is not None and previous is not sim:
+            previous._park()
+        scene = sim.scene
+        self.state.bind(scene, x, v)
+        self.params.bind(scene, rest_speed)
+        self.grid.bind(geom)
+        self.contacts.bind(scene, geom)
+        self._occupant = weakref.ref(sim)
+
+
+#: A new engine has room for at least this many spheres and cells (small scenes share
+#: one engine; a few hundred kB of fields).
+MIN_SPHERES = 1024
+MIN_CELLS = 8192
+
+
+def capacity_for(count: int, minimum: int) -> int:
+    """Room a new engine makes for ``count`` spheres or cells: at least ``minimum``,
+    rounded up to the next of 1, 1.25, 1.5, 1.75 x a power of two (at most 25 % more),
+    so that later Simulations a little larger still fit."""
+    count = max(int(count), minimum)
+    power = 1 << (count.bit_length() - 1)
+    for quarter in (4, 5, 6, 7, 8):
+        room = power * quarter // 4
+        if room >= count:
+            return room
+    return 2 * power
+
+
+_pool: list = []
+_pool_generation = None
+
+
+def acquire(key: EngineKey, n: int, n_cells: int) -> Engine:
+    """An engine of the pool with ``key`` and room for n spheres and n_cells cells (the
+    smallest such), or a new one with room for them (capacity_for)."""
+    global _pool_generation
+    if _pool_generation != key.generation:
+        _pool.clear()     # the fields of another Taichi runtime are gone
+        _pool_generation = key.generation
+    fitting = [e for e in _pool if e.key == key and e.fits(n, n_cells)]
+    if fitting:
+        return min(fitting, key=lambda e: (e.capacity, e.cell_capacity))
+    engine = Engine(key, capacity_for(n, MIN_SPHERES), capacity_for(n_cells, MIN_CELLS))
+    _pool.append(engine)
+    return engine
+
+
+def field_parts(engine: Engine) -> tuple:
+    """The objects whose attributes hold an engine's Taichi fields."""
+    p = engine.params
+    return (engine.state, p, p.count, p.vals, engine.motion, engine.grid, engine.contacts,
+            engine.projection)
