@@ -36,6 +36,7 @@ from taichi_spheres.builders import gas  # noqa: E402
 from taichi_spheres.contacts import decode_status  # noqa: E402
 from taichi_spheres.state import Features  # noqa: E402
 import bench_report  # noqa: E402  (tools/bench_report.py)
+from machine import kept_sections  # noqa: E402  (tools/machine.py)
 
 DEFAULT_SIZES = [1_000, 10_000, 100_000, 1_000_000]
 QUICK_SIZES = [1_000, 10_000]
@@ -400,8 +401,13 @@ def main(argv=None):
     print(text)
     if not args.no_write:
         os.makedirs(os.path.dirname(args.out) or ".", exist_ok=True)
+        try:    # sections other tools write into the same report stay
+            with open(args.out) as fh:
+                kept = kept_sections(fh.read())
+        except FileNotFoundError:
+            kept = ""
         with open(args.out, "w") as fh:
-            fh.write(text)
+            fh.write(text + ("\n" + kept if kept else ""))
         print(f"wrote {args.out}")
 
 

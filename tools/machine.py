@@ -23,3 +23,50 @@ def gpu_name():
         return out.stdout.strip().splitlines()[0] if out.returncode == 0 else None
     except Exception:
         return None
+
+
+SECTION_BEGIN = "<!-- begin {} -->"
+SECTION_END = "<!-- end {} -->"
+
+
+def kept_sections(text: str) -> str:
+    """The marked sections of a report (``<!-- begin NAME -->`` ... ``<!-- end NAME -->``,
+    written by write_section), so that a tool rewriting the rest keeps them."""
+    out, keep = [], False
+    for line in text.splitlines():
+        if line.startswith("<!-- begin "):
+            keep = True
+        if keep:
+            out.append(line)
+        if line.startswith("<!-- end "):
+            keep = False
+            out.append("")
+    return "\n".join(out)
+
+
+def write_section(path: str, name: str, markdown: str) -> None:
+    """Put ``markdown`` into the section NAME of the report at ``path`` (replacing the
+    section if there is one, else appending it)."""
+    try:
+        with open(path) as fh:
+            text = fh.read()
+    except FileNotFoundError:
+        text = ""
+    begin, end = SECTION_BEGIN.format(name), SECTION_END.format(name)
+    block = f"{begin}\n{markdown.strip()}\n{end}"
+    if begin in text and end in text:
+        head, rest = text.split(begin, 1)
+        text = head + block + rest.split(end, 1)[1]
+    else:
+        text = text.rstrip() + "\n\n" + block + "\n"
+    with open(path, "w") as fh:
+        fh.write(text)
+
+
+def publish(text: str, section: str, write: bool) -> None:
+    """Print a tool's report; with ``write``, also put it into docs/bench.md's section."""
+    import os
+    print(text)
+    if write:
+        write_section(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "docs",
+                                   "bench.md"), section, text)
