@@ -30,6 +30,7 @@ spare reach since (they are scanned around in the grid), until too many have.
 import numpy as np
 import taichi as ti
 
+from .config import DEFAULT, Tuning
 from .grid import BLOCK_PAIRS, FORWARD_ROWS, Grid
 from .params import (E_PAIRS, E_REST, MOVED, OPEN_OVERLAP, PAIRS, REMAINING, RESTED,
                      SEP_OVERLAP, SUPPORTED, VIRIAL, VMAX2, StepParams)
@@ -40,72 +41,18 @@ from .walls import Motion
 #: Most colours a grid can have: 3 per axis (an odd periodic axis).
 MAX_COLOURS = 27
 
-#: Below this many pending pairs a CPU sweep runs its loops serially.
-FEW_PAIRS = 1000
-#: Below this many, a CPU sweep still resolves serially (one launch for all colours:
-#: ~0.3 us per pair against ~150 us per parallel colour launch) but detects in parallel.
-SERIAL_RESOLVE_PAIRS = 50_000
-
-#: Cosine of the widest angle from vertical at which a slow contact counts as
-#: resting on a support (about 66 degrees: a sphere in the groove of two touching
-#: spheres, at 60 degrees, still does).
-SUPPORT_COS = 0.4
-
-#: Approaches slower than this fraction of the rest speed are not collided (rest rule
-#: only): repeated e = 0 collisions in a resting pile shrink the residual approach
-#: geometrically and would otherwise go on until round-off.
-REST_TOLERANCE = 0.03
-
-#: Collapse rule (inelastic pairs only): a sphere's collisions in one step from this
-#: one on are perfectly inelastic in the normal direction (a time-stepped stand-in
-#: for the TC model of Luding & McNamara 1998: collisions closer in time than
-#: about h / COLLAPSE_HITS lose their normal relative velocity).
-COLLAPSE_HITS = 4
-
-#: Upper bound on collisions one owner cell resolves in one sweep (the rest wait
-#: for the next sweep).
-MAX_BLOCK_COLLISIONS = 64
-#: An owner cell keeps the first this many pairs its detection found (cell_pairs, 1
-#: or 2); a cell with no more pairs than that resolves them from the record, one with
-#: more searches its block for each collision (earliest_in_block: ~3 us at N = 1e5).
-RECORDED_PAIRS = 2
-
-#: A re-detection visits the touched spheres in cell order (reading every sphere's
-#: flag) when more than 1 in this many spheres were touched, else in list order (so
-#: systems of fewer spheres always use cell order; cell order pays off even for a few
-#: hundred touched spheres at N = 1e5 on the 2-core CPU; compare values with
-#: ``python tools/ab_step.py contacts.DENSE_TOUCHED=K``).
-DENSE_TOUCHED = 4096
-
-#: Near lists (see :meth:`Contacts.detect`): forward neighbours kept per sphere. A
-#: sphere with more within reach leaves the list incomplete, and detection scans.
-NEAR_CAPACITY = 16
-#: Of the move budget a near list allows (see near_allowance), the part used: the
-#: rest absorbs round-off in positions.
-NEAR_SAFETY = 0.99
-#: A detection from near lists scans the spheres that moved past the allowance around
-#: them in the grid; when more than 1 in this many did, it scans everything instead
-#: (and makes new lists).
-NEAR_FAST_LIMIT = 8
-
-#: A walk around one sphere (examine_around) skips the neighbour cells it cannot reach;
-#: False walks all 27 (the same pairs; for comparing the two:
-#: ``python tools/ab_step.py contacts.PRUNE_WALKS=False``).
-PRUNE_WALKS = True
-
-
-def near_allowance(geom, r_max):
+def near_allowance(geom, r_max, safety=DEFAULT.performance.near_safety):
     """(reach, allowance) of near lists on grid ``geom`` with largest radius r_max [m]:
     a full scan visits every pair closer than ``reach`` (the narrowest cell; an axis
     of at most 2 cells without wrap has every pair adjacent), so a list of those pairs
     still holds every pair that can overlap while no sphere has moved more than
-    ``allowance`` = (reach - 2 r_max)/2 x NEAR_SAFETY since the list was made (two
+    ``allowance`` = (reach - 2 r_max)/2 x safety (Performance.near_safety) since the list was made (two
     spheres close in by at most twice that). allowance <= 0: lists are of no use."""
     reach = min((c for c, d, per in zip(geom.cell, geom.dims, geom.periodic)
                  if per or d > 2), default=float("inf"))
     if reach == float("inf"):
         return reach, 0.0
-    return reach, NEAR_SAFETY * 0.5 * (reach - 2.0 * r_max)
+    return reach, safety * 0.5 * (reach - 2.0 * r_max)
 
 
 def decode_status(status: int):
@@ -119,7 +66,7 @@ class Contacts:
     """Detection and colour-by-colour resolution of overlapping approaching pairs.
 
     Fields: active (M,) i32 — approaching overlapping pairs owned by each cell, found
-    by the last detection pass; cell_pairs (M, RECORDED_PAIRS) vec2 i32 — the first
+    by the last detection pass; cell_pairs (M, recorded_pairs) vec2 i32 — the first
     of them found (in thread-dependent order); active_list
     (M,) / n_active — the cells with active > 0; touched (N,) / n_touched — spheres a
     sweep changed; marked (N,) i32 — 1 at the grid slot (``grid.slot``) of each of
@@ -128,14 +75,16 @@ class Contacts:
 
     Near lists (near_lists=True, see :meth:`detect`), indexed by the grid slot a
     sphere had when the list was made: near_id (N,) i32 — that sphere; near (N,
-    NEAR_CAPACITY) i32 — the spheres its forward scan found closer than
+    near_capacity) i32 — the spheres its forward scan found closer than
     ``near_reach``; n_near (N,) i32 — how many; x_near (N,) vec3 — its position then;
     near_ok () i32 — 1 when the last full scan fitted every sphere's list.
     """
 
     def __init__(self, state: SphereState, grid: Grid, params: StepParams, motion: Motion,
                  features: Features, serial_light: bool, serial_heavy: bool,
-                 serial_few: bool = False, near_lists: bool = False):
+                 serial_few: bool = False, near_lists: bool = False, tuning: Tuning = DEFAULT):
+        self.rules = tuning.physics
+        self.perf = tuning.performance
         self.state = state
         self.grid = grid
         self.params = params
@@ -152,8 +101,8 @@ class Contacts:
         cap = state.capacity
         self.active = ti.field(ti.i32, shape=cells)
         # the first pairs the detection counted for a cell (all of them when it found
-        # at most RECORDED_PAIRS), oriented as the forward scan meets them
-        self.cell_pairs = ti.Vector.field(2, ti.i32, shape=(cells, RECORDED_PAIRS))
+        # at most recorded_pairs), oriented as the forward scan meets them
+        self.cell_pairs = ti.Vector.field(2, ti.i32, shape=(cells, self.perf.recorded_pairs))
         # stencils as small tables walked by runtime loops (unrolling them multiplies
         # compile time)
         self.fwd_rows = ti.Vector.field(4, ti.i32, shape=len(FORWARD_ROWS))
@@ -195,7 +144,7 @@ class Contacts:
             # indexed by the grid slot the sphere had when its list was made, so that
             # the scan writes them in order
             self.near_id = ti.field(ti.i32, shape=cap)
-            self.near = ti.field(ti.i32, shape=(cap, NEAR_CAPACITY))
+            self.near = ti.field(ti.i32, shape=(cap, self.perf.near_capacity))
             self.n_near = ti.field(ti.i32, shape=cap)
             self.x_near = ti.Vector.field(3, self.real, shape=cap)
             self.near_ok = ti.field(ti.i32, shape=())
@@ -271,7 +220,7 @@ class Contacts:
         extent = max(max(abs(a), abs(b)) for a, b in zip(scene.box_lo, scene.box_hi))
         r_max = float(scene.radius.max())
         self.walk_reach[None] = r_max + 64.0 * eps * (extent + max(geom.cell))
-        self.near_reach, allowance = near_allowance(geom, r_max)
+        self.near_reach, allowance = near_allowance(geom, r_max, self.perf.near_safety)
         if self.near_lists:
             if not allowance > 0:
                 raise ValueError("near lists need cells wider than the largest diameter")
@@ -336,12 +285,12 @@ class Contacts:
     @ti.func
     def approaching_pair(self, i, j, dd, du, uu, ss):
         """approaching(), and for a resting contact (see resting()) faster than
-        REST_TOLERANCE x the rest speed: a slower one is left alone (it closes the gap by
+        rules.rest_tolerance x the rest speed: a slower one is left alone (it closes the gap by
         less than that speed x h per step; gravity makes it faster by g h in the next)."""
         out = self.approaching(dd, du, uu, ss)
         if ti.static(self.f.rest_rule):
             if out and self.resting(i, j):
-                out = du * du > ti.static(REST_TOLERANCE ** 2) * self.params.rest_speed[None] ** 2 * dd
+                out = du * du > ti.static(self.rules.rest_tolerance ** 2) * self.params.rest_speed[None] ** 2 * dd
         return out
 
     @ti.func
@@ -383,7 +332,7 @@ class Contacts:
         (Features.rest_rule): an approach slower than the rest speed is perfectly
         inelastic in the normal direction (u_n' = 0, tangential kept) whatever the
         model. Supports (Features.supports): such a slow contact whose normal is
-        within about 66 degrees of vertical (SUPPORT_COS), with a supported sphere below (on the floor,
+        within about 66 degrees of vertical (rules.support_cos), with a supported sphere below (on the floor,
         or itself stopped by a supported sphere in this step) and an unsupported one
         above, stops the upper sphere's approach without moving the lower one (the
         floor carries the load: shock propagation, Guendelman et al. 2003), unless
@@ -400,12 +349,12 @@ class Contacts:
                 e = self.params.e[None]
             rest = False
             if ti.static(not self.f.elastic):
-                # collapse rule: from a sphere's COLLAPSE_HITS-th collision in one
+                # collapse rule: from a sphere's rules.collapse_hits-th collision in one
                 # step on, its collisions are perfectly inelastic (normal), so that
                 # dense clusters cannot collide without end within a step; inelastic
                 # pairs only (e < 1 checked here too: compiled in with e = 1 it must
                 # not change the physics)
-                rest = e < 1 and ti.max(self.state.hits[i], self.state.hits[j]) >= ti.static(COLLAPSE_HITS - 1)
+                rest = e < 1 and ti.max(self.state.hits[i], self.state.hits[j]) >= ti.static(self.rules.collapse_hits - 1)
             if ti.static(self.f.rest_rule):
                 rest = rest or (-un < self.params.rest_speed[None] and self.resting(i, j))
             wi = ti.cast(0.5, self.real)
@@ -472,10 +421,10 @@ class Contacts:
         upper = -1
         si = self.state.support[i]
         sj = self.state.support[j]
-        if up > SUPPORT_COS and sj == 1 and si == 0:
+        if up > ti.static(self.rules.support_cos) and sj == 1 and si == 0:
             upper = i
             dvi = -un * n          # (v_i' - v_j).n = 0
-        elif up < -SUPPORT_COS and si == 1 and sj == 0:
+        elif up < -ti.static(self.rules.support_cos) and si == 1 and sj == 0:
             upper = j
             dvj = un * n           # (v_i - v_j').n = 0
         if upper >= 0:
@@ -541,7 +490,7 @@ class Contacts:
                     cj = self.grid.coords(self.grid.cell_of[j])
                     owner = self.grid.linear(self.grid.owner(ci, cj))
                     found = ti.atomic_add(self.active[owner], 1)
-                    if found < RECORDED_PAIRS:
+                    if found < ti.static(self.perf.recorded_pairs):
                         # oriented as the forward scan meets it, whichever pass found it
                         # (the bits of a collision depend on the order of its spheres)
                         if self.grid.forward(ci, cj, self.grid.slot[i], q):
@@ -606,19 +555,19 @@ class Contacts:
                         kept = self.keep_near(p, q, dd, kept)
             if ti.static(keep):
                 self.near_id[p] = i
-                self.n_near[p] = ti.min(kept, NEAR_CAPACITY)
+                self.n_near[p] = ti.min(kept, ti.static(self.perf.near_capacity))
                 self.x_near[p] = xi
-                if kept > NEAR_CAPACITY:
+                if kept > ti.static(self.perf.near_capacity):
                     self.near_ok[None] = 0
 
     @ti.func
     def keep_near(self, p, q, dd, kept):
         """Append j = grid.order[q] to the near list of the sphere at slot p if closer
         than near_reach (dd = squared distance [m^2]); returns the new count (past
-        NEAR_CAPACITY: the list is incomplete, the pair is not stored)."""
+        near_capacity: the list is incomplete, the pair is not stored)."""
         out = kept
         if dd < self.near_reach2[None]:
-            if kept < NEAR_CAPACITY:
+            if kept < ti.static(self.perf.near_capacity):
                 self.near[p, kept] = self.grid.order[q]
             out += 1
         return out
@@ -640,7 +589,7 @@ class Contacts:
         """The near lists can serve this detection (after mark_fast_movers): complete
         when made, and few enough fast movers to scan around."""
         return self.near_ok[None] == 1 and \
-            self.n_touched[None] <= self.state.n_spheres[None] // NEAR_FAST_LIMIT
+            self.n_touched[None] <= self.state.n_spheres[None] // ti.static(self.perf.near_fast_limit)
 
     @ti.func
     def scan_near(self, live):
@@ -678,14 +627,14 @@ class Contacts:
     def detect_around_touched(self, serial: ti.template(), live=True):
         """Scan of the full stencil (up to 9 rows along z, examine_around) from spheres
         touched in this sweep; a pair of two touched spheres is examined once, from the
-        lower id. When many spheres were touched (more than 1 in DENSE_TOUCHED) they are
+        lower id. When many spheres were touched (more than 1 in dense_touched) they are
         visited in cell order, found by their ``marked`` flags: neighbouring visits then
         share cells and cache lines, which in list order (random in space) cost a cache
         miss per row; with few, the list is cheaper than reading every flag."""
         n_t = 0
         if live:
             n_t = self.n_touched[None]
-        dense = n_t > self.state.n_spheres[None] // DENSE_TOUCHED   # (no i32 overflow)
+        dense = n_t > self.state.n_spheres[None] // ti.static(self.perf.dense_touched)   # (no i32 overflow)
         if dense:
             n_t = self.state.n_spheres[None]
         # one loop for both orders: a parallel loop costs its launch even when empty
@@ -708,13 +657,13 @@ class Contacts:
         the cells among its 27 that can hold a sphere overlapping it: a neighbour across
         a face only if i is within r_i + r_max + M of that face, M = vals[MOVED] (no
         sphere moved farther since the grid was built; plus a round-off margin): the
-        same pairs as all 27 cells (PRUNE_WALKS = False), with fewer rows and cells
+        same pairs as all 27 cells (prune_walks = False), with fewer rows and cells
         visited."""
         ci = self.grid.coords(self.grid.cell_of[i])
         xi = self.grid.xs[p]
         lower = ti.Vector([1, 1, 1])
         upper = ti.Vector([1, 1, 1])
-        if ti.static(PRUNE_WALKS):
+        if ti.static(self.perf.prune_walks):
             reach = self.state.rad(i) + self.params.vals[MOVED] + self.walk_reach[None]
             lower, upper = self.grid.sides_within(self.min_image(xi - self.grid.corner(ci)), reach)
         for dx in range(-lower[0], upper[0] + 1):
@@ -777,14 +726,14 @@ class Contacts:
     def resolve_cell(self, c, k):
         """Collide the pairs owned by cell c (vec3, linear index k), earliest contact
         first, as many as the last detection counted there (at most
-        MAX_BLOCK_COLLISIONS): each time the earliest among the pairs cell_pairs
+        max_block_collisions): each time the earliest among the pairs cell_pairs
         recorded when it holds them all, else by searching the block."""
-        budget = ti.min(self.active[k], MAX_BLOCK_COLLISIONS)
+        budget = ti.min(self.active[k], ti.static(self.perf.max_block_collisions))
         for _it in range(budget):
             bi = -1
             bj = -1
             s = ti.cast(-1, self.real)
-            if budget <= RECORDED_PAIRS:
+            if budget <= ti.static(self.perf.recorded_pairs):
                 bi, bj, s = self.earliest_recorded(k, budget)
             else:
                 bi, bj, s = self.earliest_in_block(c)
@@ -803,7 +752,7 @@ class Contacts:
         both, so a pair that must wait marks its spheres for the next sweep."""
         a = self.cell_pairs[k, 0]
         b = a
-        if ti.static(RECORDED_PAIRS == 2):
+        if ti.static(self.perf.recorded_pairs == 2):
             if count == 2:
                 b = self.cell_pairs[k, 1]
                 lo_a = ti.min(a[0], a[1])
@@ -936,7 +885,7 @@ class Contacts:
     def detect(self):
         """Full detection (fills ``active`` and count[REMAINING]) on a freshly built
         grid; returns (status, from_list). From the near lists while they are
-        complete and at most 1 sphere in NEAR_FAST_LIMIT moved more than the allowance
+        complete and at most 1 sphere in near_fast_limit moved more than the allowance
         since a full scan made them (those are scanned around in the grid), else by a
         full scan, which makes new lists. Both find the same pairs and give the same bits; the list
         examines about 2 pairs per sphere in a gas at packing fraction 0.3 instead of
@@ -957,9 +906,9 @@ class Contacts:
         serially and the detection in parallel, in one launch; otherwise (and on GPUs)
         the colours run in parallel one launch each. (A kernel looping over sweeps
         would save a launch per sweep but doubles the compile time: see fused.py.)"""
-        if self.serial_heavy or (self.serial_few and pending <= FEW_PAIRS):
+        if self.serial_heavy or (self.serial_few and pending <= self.perf.few_pairs):
             return self.sweep_serial()
-        if self.serial_few and pending <= SERIAL_RESOLVE_PAIRS:
+        if self.serial_few and pending <= self.perf.serial_resolve_pairs:
             return self.sweep_mixed()
         self.bucket_parallel()
         for k in range(len(self.colours)):

@@ -5,7 +5,7 @@ fields (state, parameters, grid, contacts, projection) with the kernels over the
 scene's numbers (sphere count, box, cell layout, radii, masses, restitution, gravity)
 are data in those fields, and only what changes the code is compiled in: the
 features (``state.Features``), the serial/parallel loop variants chosen by the
-sphere count, near lists, and the engine's tuning constants. A Simulation asks the
+sphere count, near lists, and the options (``config.Tuning``). A Simulation asks the
 pool for an engine with its key and room for its spheres and cells; a later
 Simulation with the same key and no more spheres or cells runs on the same engine
 and compiles nothing (``tools/compile_once.py`` measures it).
@@ -23,27 +23,16 @@ from __future__ import annotations
 import dataclasses
 import weakref
 
-from . import contacts, grid, projection, walls
+from .config import Tuning
 from .contacts import Contacts
 from .fused import FusedStep
 from .grid import Grid, GridGeometry
 from .params import StepParams
-from .projection import DEFAULT_TOLERANCE, Projection
+from .projection import Projection
 from .state import Features, SphereState
 from .walls import Motion
 
-__all__ = ["EngineKey", "Engine", "acquire", "capacity_for", "tuning"]
-
-
-def tuning() -> tuple:
-    """The module constants the kernels compile in (contacts, projection, walls, grid),
-    as (name, value) pairs: an engine built with other values is another engine."""
-    names = {contacts: ("SUPPORT_COS", "REST_TOLERANCE", "COLLAPSE_HITS", "MAX_BLOCK_COLLISIONS",
-                        "RECORDED_PAIRS", "DENSE_TOUCHED", "NEAR_CAPACITY", "NEAR_FAST_LIMIT",
-                        "PRUNE_WALKS"),
-             projection: ("DEFAULT_TOLERANCE", "MAX_ITERATIONS", "RELAXATION", "NEAR_SETS"),
-             walls: ("MAX_WALL_BOUNCES",), grid: ("SCAN_BLOCK",)}
-    return tuple((f"{m.__name__}.{k}", getattr(m, k)) for m, ks in names.items() for k in ks)
+__all__ = ["EngineKey", "Engine", "acquire", "capacity_for"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -52,7 +41,7 @@ class EngineKey:
     (runtime.Runtime.generation: arch, precision, threads, compile mode), the scene's
     features, the loop variants (serial_light: cheap loops serial; serial_heavy:
     detection and sweeps serial; serial_few: a serial sweep variant for few pairs),
-    near lists, and the tuning constants."""
+    near lists, and the options (config.Tuning)."""
 
     generation: int
     real: object
@@ -61,7 +50,7 @@ class EngineKey:
     serial_heavy: bool
     serial_few: bool
     near_lists: bool
-    tuning: tuple
+    tuning: Tuning
 
 
 class Engine:
@@ -78,14 +67,16 @@ class Engine:
         f = key.features
         self.state = SphereState(capacity, f, key.real)
         self.params = StepParams(key.real)
-        self.motion = Motion(self.state, self.params, f, key.serial_light)
+        t = key.tuning
+        self.motion = Motion(self.state, self.params, f, key.serial_light, t)
         periodic = tuple(not w for w in f.wall_axes)
-        self.grid = Grid(cell_capacity, periodic, self.state, key.serial_light)
+        self.grid = Grid(cell_capacity, periodic, self.state, key.serial_light,
+                         t.performance.scan_block)
         self.contacts = Contacts(self.state, self.grid, self.params, self.motion, f,
                                  key.serial_light, key.serial_heavy,
-                                 serial_few=key.serial_few, near_lists=key.near_lists)
+                                 serial_few=key.serial_few, near_lists=key.near_lists, tuning=t)
         self.projection = Projection(self.state, self.grid, self.contacts, self.motion, f,
-                                     key.serial_light, DEFAULT_TOLERANCE)
+                                     key.serial_light, t)
         self._fused = None
         self._occupant = None      # weakref to the Simulation bound last
 

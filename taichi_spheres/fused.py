@@ -10,7 +10,7 @@ from .contacts import Contacts
 from .grid import Grid
 from .params import (OPEN_OVERLAP, PROJ_WORST, PROJECTED, PROJECTED_PAIRS, REMAINING,
                      SEP_OVERLAP)
-from .projection import MAX_ITERATIONS, Projection
+from .projection import Projection
 from .walls import Motion
 
 
@@ -66,7 +66,7 @@ class FusedStep:
             it = 1
             while ti.cast(projection.worst[None], ti.f64) > tol:
                 params.count[PROJECTED_PAIRS] += projection.pushed[None]
-                if it == MAX_ITERATIONS:
+                if it == ti.static(projection.max_iterations):
                     break
                 grid._build_body()
                 projection._project_near_body()

@@ -20,16 +20,10 @@ import math
 
 import taichi as ti
 
+from .config import DEFAULT, Performance
 from .state import SphereState
 
-__all__ = ["GridGeometry", "Grid", "BLOCK_PAIRS", "FORWARD_ROWS", "ALL_ROWS", "SCAN_BLOCK"]
-
-SCAN_BLOCK = 1024
-#: At most about this many cells per sphere: dilute scenes keep memory O(N).
-MAX_CELLS_PER_SPHERE = 8.0
-#: Cells aim at the largest diameter plus this many times the largest move per step
-#: (step_fraction x smallest radius): see GridGeometry.for_box.
-WIDE_MARGIN = 4.0
+__all__ = ["GridGeometry", "Grid", "BLOCK_PAIRS", "FORWARD_ROWS", "ALL_ROWS"]
 
 
 def _block_pairs():
@@ -80,15 +74,19 @@ class GridGeometry:
     slack: float
 
     @classmethod
-    def for_scene(cls, scene, step_fraction):
+    def for_scene(cls, scene, step_fraction, perf: Performance = DEFAULT.performance):
         """for_box for a Scene's box, radii and sphere count (what Simulation builds,
         and what the memory estimate counts)."""
         return cls.for_box(scene.box_lo, scene.box_hi, scene.periodic,
                            float(scene.radius.max()), float(scene.radius.min()), scene.n,
-                           step_fraction)
+                           step_fraction, perf)
 
     @classmethod
-    def for_box(cls, lo, hi, periodic, r_max, r_min, n, step_fraction):
+    def for_box(cls, lo, hi, periodic, r_max, r_min, n, step_fraction,
+                perf: Performance = DEFAULT.performance):
+        """Cells of at least the largest diameter plus a margin for moves, aiming at
+        perf.wide_margin x the largest move per step (step_fraction x r_min), at most
+        about perf.max_cells_per_sphere per sphere; at least 3 on a periodic axis."""
         slack = step_fraction * r_min
         # the grid is built after the drift, so the margin is for the moves that come
         # after it: a collision carried forward can move a sphere by up to twice a step's
@@ -96,10 +94,10 @@ class GridGeometry:
         # makes re-binnings mid-step common in dense gases (min_cell is what the
         # stencil needs, wide_cell what the grid aims at)
         min_cell = 2.0 * r_max + 2.0 * slack
-        wide_cell = 2.0 * r_max + WIDE_MARGIN * slack
-        # no more cells than MAX_CELLS_PER_SPHERE per sphere: dilute scenes keep memory O(N)
+        wide_cell = 2.0 * r_max + perf.wide_margin * slack
+        # no more cells than max_cells_per_sphere per sphere: dilute scenes keep memory O(N)
         volume = math.prod(h - l for l, h in zip(lo, hi))
-        target = max(wide_cell, (volume / (MAX_CELLS_PER_SPHERE * max(n, 1))) ** (1 / 3))
+        target = max(wide_cell, (volume / (perf.max_cells_per_sphere * max(n, 1))) ** (1 / 3))
         dims, cell = [], []
         for a in range(3):
             length = hi[a] - lo[a]
@@ -167,7 +165,7 @@ class Grid:
     """
 
     def __init__(self, cell_capacity: int, periodic: tuple, state: SphereState,
-                 serial_light: bool):
+                 serial_light: bool, scan_block: int = DEFAULT.performance.scan_block):
         self.periodic = tuple(bool(p) for p in periodic)
         self.state = state
         self.real = state.real
@@ -175,6 +173,7 @@ class Grid:
         self.geom = None
         self.m = 0
         self.serial_light = serial_light
+        self.scan_block = scan_block
         cap = state.capacity
         self.start = ti.field(ti.i32, shape=cell_capacity + 1)
         self.cursor = ti.field(ti.i32, shape=cell_capacity)
@@ -187,8 +186,8 @@ class Grid:
         # levels with one item)
         self.scan_capacity = [cell_capacity]
         self.scan_bufs = [self.start]
-        while self.scan_capacity[-1] > SCAN_BLOCK:
-            size = -(-self.scan_capacity[-1] // SCAN_BLOCK)
+        while self.scan_capacity[-1] > scan_block:
+            size = -(-self.scan_capacity[-1] // scan_block)
             self.scan_capacity.append(size)
             self.scan_bufs.append(ti.field(ti.i32, shape=size))
         self.scan_size = ti.field(ti.i32, shape=len(self.scan_capacity))
@@ -224,7 +223,7 @@ class Grid:
         size = geom.n_cells
         for level in range(len(self.scan_capacity)):
             self.scan_size[level] = size
-            size = -(-size // SCAN_BLOCK)
+            size = -(-size // self.scan_block)
 
     @property
     def scan_sizes(self):
@@ -369,7 +368,7 @@ class Grid:
     @ti.func
     def _exclusive_scan(self):
         """In-place exclusive prefix sum of start[0:M] (blocked, every arch)."""
-        B = ti.static(SCAN_BLOCK)
+        B = ti.static(self.scan_block)
         levels = ti.static(len(self.scan_capacity))
         for lv in ti.static(range(levels - 1)):
             buf = ti.static(self.scan_bufs[lv])

@@ -19,28 +19,20 @@ its spheres moved, and only spheres in a pair above tolerance (*involved*) move,
 later iteration examines just the spheres within the 27-cell stencil of the spheres
 involved in the iteration before: every other pair is unchanged and below tolerance.
 Each examined sphere's push is computed over all its pairs as in a full scan, so the
-positions are the same bits as with a full scan every iteration (``NEAR_SETS = False``,
-tests), and so are the pushed-pair counts and the largest overlap, which is kept per
+positions are the same bits as with a full scan every iteration
+(``Performance.projection_near_sets = False``, tests), and so are the pushed-pair counts and the largest overlap, which is kept per
 sphere (``rmax``) and reduced over all spheres once at the end.
 """
 
 import numpy as np
 import taichi as ti
 
+from .config import DEFAULT, Tuning
 from .contacts import Contacts
 from .grid import ALL_ROWS, Grid
 from .state import Features, SphereState
 from .walls import Motion
 
-#: Pairs overlapping by more than this fraction of their contact distance are projected.
-DEFAULT_TOLERANCE = 1e-4
-#: Jacobi iterations per step at most (each one scans the neighbourhood of every sphere).
-MAX_ITERATIONS = 8
-#: Jacobi relaxation: each iteration removes this fraction of every pair's overlap.
-RELAXATION = 0.5
-#: Later iterations examine only the neighbourhood of the spheres involved before
-#: (False: every sphere, every iteration; read when a Projection is built; tests).
-NEAR_SETS = True
 
 
 @ti.data_oriented
@@ -55,7 +47,7 @@ class Projection:
     spheres after ``finish``; pushed (0-d) i32 — pairs pushed by the last iteration."""
 
     def __init__(self, state: SphereState, grid: Grid, contacts: Contacts, motion: Motion,
-                 features: Features, serial: bool, tolerance: float):
+                 features: Features, serial: bool, tuning: Tuning = DEFAULT):
         self.state = state
         self.grid = grid
         self.contacts = contacts    # its minimum-image separation
@@ -63,8 +55,12 @@ class Projection:
         self.f = features
         self.real = state.real
         self.serial = serial
-        self.tolerance = tolerance
-        self.near_sets = NEAR_SETS
+        # relative overlap above which pairs are pushed, iterations per step at most,
+        # fraction of an overlap one iteration removes, near sets (config.py)
+        self.tolerance = tuning.physics.overlap_tolerance
+        self.max_iterations = tuning.physics.projection_iterations
+        self.relaxation = tuning.physics.projection_relaxation
+        self.near_sets = tuning.performance.projection_near_sets
         cap = state.capacity
         self.push = ti.Vector.field(3, self.real, shape=cap)
         self.rmax = ti.field(self.real, shape=cap)
@@ -101,7 +97,7 @@ class Projection:
     @ti.func
     def _project_all_body(self):
         """First iteration: measure every overlap, push pairs above tolerance apart by
-        RELAXATION x their overlap, then put spheres back inside the box."""
+        the relaxation x their overlap, then put spheres back inside the box."""
         self._begin_iteration()
         ti.loop_config(serialize=ti.static(self.serial))
         for p in range(self.state.n_spheres[None]):
@@ -200,7 +196,7 @@ class Projection:
     @ti.func
     def pair_push(self, xi, i, q, wi_num, tol):
         """(displacement of sphere i [m] from its overlap with j = grid.order[q], zero
-        below tolerance: RELAXATION x overlap along the line of centres, times i's
+        below tolerance: the relaxation x overlap along the line of centres, times i's
         inverse-mass weight; relative overlap 1 - |d|/sigma, 0 if they do not overlap).
         x_j comes from grid.xs: every iteration examines right after a grid build."""
         out = ti.Vector.zero(self.real, 3)
@@ -216,7 +212,7 @@ class Projection:
                     w = ti.cast(0.5, self.real)
                     if ti.static(not self.f.equal_masses):
                         w = wi_num / (wi_num + self.state.inv_mass_of(j))
-                    out = ti.cast(RELAXATION, self.real) * w * (sigma - dist) / dist * d
+                    out = ti.cast(ti.static(self.relaxation), self.real) * w * (sigma - dist) / dist * d
                     if i < j:
                         ti.atomic_add(self.pushed[None], 1)
         return out, rel

@@ -22,8 +22,8 @@ from taichi.lang.util import to_numpy_type
 
 from . import engine as engines
 from . import runtime
-from .contacts import NEAR_CAPACITY, REST_TOLERANCE, decode_status, near_allowance
-from .projection import DEFAULT_TOLERANCE, MAX_ITERATIONS
+from .config import DEFAULT, Performance, Tuning
+from .contacts import decode_status, near_allowance
 from .grid import GridGeometry
 from . import observe
 from .params import (E_PAIRS, E_REST, E_WALLS, FLOOR, MULTI, OPEN_OVERLAP, PAIRS, PROJ_WORST,
@@ -41,50 +41,46 @@ __all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS", "rest_sp
 #: parameters within (0.1)^2/4 = 0.25 % of sigma^2 of grazing, which exchange almost
 #: no momentum. Tighter values trade speed for accuracy (tools/work_precision.py).
 DEFAULT_STEP_FRACTION = 0.1
-#: Automatic rest speed under gravity, in units of sqrt(2 g D) with D = step_fraction
-#: x smallest radius: the largest speed gravity adds to a pair in one step (a
-#: sphere resting on a support gains g h <= sqrt(2 g D) before the contact is
-#: resolved). Bounces slower than this (dropped from below 4 D = 0.4 r at the
-#: default step) are perfectly inelastic; the threshold shrinks with step_fraction.
-REST_SPEED_FACTOR = 2.0
+#: The default automatic rest speed factor (config.Rules.rest_speed_factor: a sphere
+#: resting on a support gains g h <= sqrt(2 g D) before the contact is resolved, so
+#: bounces slower than 2 sqrt(2 g D), dropped from below 4 D = 0.4 r at the default
+#: step, are perfectly inelastic; the threshold shrinks with step_fraction).
+REST_SPEED_FACTOR = DEFAULT.physics.rest_speed_factor
 #: Default limit on detect/resolve sweeps per step.
 DEFAULT_MAX_SWEEPS = 32
-# below these sphere counts CPU loops run serially: Taichi's CPU parallel-for costs
-# ~150 us per launch, more than the whole loop for small N
-_SERIAL_LIGHT_BELOW = 200_000
-_SERIAL_HEAVY_BELOW = 3_000
-#: From this many spheres on, detection keeps near lists (contacts.Contacts.detect);
-#: below, a scan costs little and the lists would lengthen compiling the fused step.
-NEAR_LISTS_FROM = _SERIAL_HEAVY_BELOW
 
 
-def rest_speed_for(scene: Scene, step_fraction: float = DEFAULT_STEP_FRACTION) -> float:
+def rest_speed_for(scene: Scene, step_fraction: float = DEFAULT_STEP_FRACTION,
+                   tuning: Tuning = DEFAULT) -> float:
     """The rest speed a Simulation uses [m/s]: the scene's ``rest_speed`` if given,
-    else REST_SPEED_FACTOR * sqrt(2 |g| step_fraction r_min) with gravity and 0
-    (rule off) without; always 0 for elastic pairs (e = 1 stays exactly elastic)."""
+    else rest_speed_factor * sqrt(2 |g| step_fraction r_min) with gravity (config.Rules)
+    and 0 (rule off) without; always 0 for elastic pairs (e = 1 stays exactly elastic)."""
     if scene.restitution == 1.0:
         return 0.0
     if scene.rest_speed is not None:
         return float(scene.rest_speed)
     g = float(np.linalg.norm(scene.gravity))
-    return REST_SPEED_FACTOR * math.sqrt(2.0 * g * step_fraction * float(scene.radius.min()))
+    return tuning.physics.rest_speed_factor * \
+        math.sqrt(2.0 * g * step_fraction * float(scene.radius.min()))
 
 
 def estimate_field_bytes(scene: Scene, precision: str = "f64",
-                         step_fraction: float = DEFAULT_STEP_FRACTION) -> int:
+                         step_fraction: float = DEFAULT_STEP_FRACTION,
+                         tuning: Tuning = DEFAULT) -> int:
     """Device memory a Simulation of ``scene`` allocates for its Taichi fields [bytes]
     when it builds a new engine (room for engine.capacity_for its spheres and cells),
     counted per sphere and per grid cell without initialising Taichi (``cli info``).
     tests/test_gas.py holds it to within 3 % of :meth:`Simulation.field_bytes`."""
-    geom = GridGeometry.for_scene(scene, step_fraction)
-    features = Features.from_scene(scene, rest_speed_for(scene, step_fraction))
+    geom = GridGeometry.for_scene(scene, step_fraction, tuning.performance)
+    features = Features.from_scene(scene, rest_speed_for(scene, step_fraction, tuning))
     return field_bytes_for(engines.capacity_for(scene.n, engines.MIN_SPHERES),
                            engines.capacity_for(geom.n_cells, engines.MIN_CELLS), features,
-                           _keeps_near_lists(scene, geom), precision)
+                           _keeps_near_lists(scene, geom, tuning.performance), precision,
+                           tuning.performance.near_capacity)
 
 
 def field_bytes_for(spheres: int, cells: int, features: Features, near_lists: bool,
-                    precision: str) -> int:
+                    precision: str, near_capacity: int = DEFAULT.performance.near_capacity) -> int:
     """Bytes of an engine's fields with room for ``spheres`` and ``cells`` [bytes]."""
     real = 8 if precision == "f64" else 4
     # x, v, grid.xs, projection push (4 vec3), moved, earliest, projection rmax; hits,
@@ -92,15 +88,35 @@ def field_bytes_for(spheres: int, cells: int, features: Features, near_lists: bo
     per_sphere = 12 * real + 3 * real + 9 * 4 + (4 if features.supports else 0)
     per_sphere += (0 if features.equal_radii else real) + (0 if features.equal_masses else real)
     if near_lists:
-        per_sphere += (NEAR_CAPACITY + 2) * 4 + 3 * real   # near, near_id, n_near; x_near
+        per_sphere += (near_capacity + 2) * 4 + 3 * real   # near, near_id, n_near; x_near
     per_cell = 9 * 4   # start, cursor; active, cell_pairs (2 x 2), active_list, by_colour
     return spheres * per_sphere + cells * per_cell
 
 
-def _keeps_near_lists(scene: Scene, geom: GridGeometry) -> bool:
+def _keeps_near_lists(scene: Scene, geom: GridGeometry, perf: Performance) -> bool:
     """Whether a Simulation of ``scene`` on grid ``geom`` keeps near lists: from
-    NEAR_LISTS_FROM spheres on, where the cells leave room for moves."""
-    return scene.n >= NEAR_LISTS_FROM and near_allowance(geom, float(scene.radius.max()))[1] > 0
+    perf.near_lists_from spheres on, where the cells leave room for moves."""
+    return scene.n >= perf.near_lists_from and \
+        near_allowance(geom, float(scene.radius.max()), perf.near_safety)[1] > 0
+
+
+def _checked_arguments(scene, step_fraction, max_sweeps, fused, compile_all, tuning) -> float:
+    """Raise ValueError naming a bad Simulation argument; returns step_fraction."""
+    if not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a taichi_spheres.Scene, got {type(scene).__name__}")
+    step_fraction = float(step_fraction)
+    if not (0.0 < step_fraction <= 1.0):
+        raise ValueError(f"step_fraction must be in (0, 1], got {step_fraction}")
+    if not isinstance(max_sweeps, int) or max_sweeps < 1:
+        raise ValueError(f"max_sweeps must be a positive int, got {max_sweeps!r}")
+    if not isinstance(fused, bool):
+        raise ValueError(f"fused must be True or False, got {fused!r}")
+    if not isinstance(compile_all, bool):
+        raise ValueError(f"compile_all must be True or False, got {compile_all!r}")
+    if tuning is not None and not isinstance(tuning, Tuning):
+        raise ValueError(f"tuning must be a taichi_spheres.config.Tuning, got "
+                         f"{type(tuning).__name__}")
+    return step_fraction
 
 
 def _field_nbytes(field) -> int:
@@ -123,49 +139,36 @@ class Simulation:
     two kernel launches (fused.py; same bits; 1,000 spheres piling up ran 1.45x
     faster in tools/peer_lammps.py), at the price of compiling its kernels once per scene
     (~10-60 s on 2 cores; Taichi's offline cache keeps them for later runs); ignored
-    elsewhere. Off by default: worth it for long or repeated runs.
+    elsewhere. Off by default: worth it for long or repeated runs. tuning: the
+    engine's options (config.Tuning: physics rules and performance knobs; default
+    config.DEFAULT).
     """
 
     def __init__(self, scene: Scene, arch: str = "cpu", precision: str | None = None,
                  step_fraction: float = DEFAULT_STEP_FRACTION,
                  max_sweeps: int = DEFAULT_MAX_SWEEPS, threads: int | None = None,
-                 compile_all: bool = False, fused: bool = False):
-        if not isinstance(scene, Scene):
-            raise ValueError(f"scene must be a taichi_spheres.Scene, got {type(scene).__name__}")
-        step_fraction = float(step_fraction)
-        if not (0.0 < step_fraction <= 1.0):
-            raise ValueError(f"step_fraction must be in (0, 1], got {step_fraction}")
-        if not isinstance(max_sweeps, int) or max_sweeps < 1:
-            raise ValueError(f"max_sweeps must be a positive int, got {max_sweeps!r}")
-        if not isinstance(fused, bool):
-            raise ValueError(f"fused must be True or False, got {fused!r}")
-        if not isinstance(compile_all, bool):
-            raise ValueError(f"compile_all must be True or False, got {compile_all!r}")
+                 compile_all: bool = False, fused: bool = False, tuning: Tuning | None = None):
+        step_fraction = _checked_arguments(scene, step_fraction, max_sweeps, fused,
+                                           compile_all, tuning)
         self.scene = scene
         self.step_fraction = step_fraction
         self.max_sweeps = max_sweeps
-        self.rest_speed = rest_speed_for(scene, step_fraction)
+        self.tuning = tuning or DEFAULT
+        self.rest_speed = rest_speed_for(scene, step_fraction, self.tuning)
         self.features = Features.from_scene(scene, self.rest_speed)
         if compile_all:
             self.features = Features(gravity_axes=(True, True, True),
                                      wall_axes=self.features.wall_axes, equal_radii=False,
                                      equal_masses=False, elastic=False, elastic_walls=False,
                                      smid=self.features.smid, rest_rule=self.features.rest_rule)
-        self.geometry = GridGeometry.for_scene(scene, step_fraction)
+        self.geometry = GridGeometry.for_scene(scene, step_fraction, self.tuning.performance)
         self.runtime = runtime.ensure(arch, precision, threads)
         self.precision = self.runtime.precision
-        cpu = self.runtime.is_cpu
-        n = scene.n
-        key = engines.EngineKey(
-            generation=self.runtime.generation,
-            real=ti.f64 if self.precision == "f64" else ti.f32, features=self.features,
-            serial_light=cpu and n < _SERIAL_LIGHT_BELOW,
-            serial_heavy=cpu and n < _SERIAL_HEAVY_BELOW, serial_few=cpu,
-            near_lists=_keeps_near_lists(scene, self.geometry), tuning=engines.tuning())
-        self._engine = engines.acquire(key, n, self.geometry.n_cells)
+        key = self._engine_key()
+        self._engine = engines.acquire(key, scene.n, self.geometry.n_cells)
         self._parked = (scene.x, scene.v)
         self._bind()
-        self._overlap_tolerance = DEFAULT_TOLERANCE
+        self._overlap_tolerance = self.tuning.physics.overlap_tolerance
         # small CPU systems can run each step in one or two serial kernels (fused.py)
         self._fused = self._engine.fused_step() if fused and key.serial_heavy else None
         self._r_min = float(scene.radius.min())
@@ -198,7 +201,7 @@ class Simulation:
     @property
     def overlap_tolerance(self) -> float:
         """Relative overlap above which the projection pushes pairs apart (fixed when the
-        kernels are built: projection.DEFAULT_TOLERANCE)."""
+        kernels are built: config.Rules.overlap_tolerance)."""
         return self._overlap_tolerance
 
     def field_bytes(self) -> int:
@@ -328,7 +331,7 @@ class Simulation:
         """Largest h such that no sphere moves more than step_fraction * r_min [s]:
         v_max h + g h^2/2 <= D, i.e. h = 2 D / (v_max + sqrt(v_max^2 + 2 g D)); with
         resting contact (gravity and the rest rule, and a sphere supported by the floor
-        in the last step) also g h <= REST_TOLERANCE x rest speed / 2, so that the approach gravity adds in one step is below the rest
+        in the last step) also g h <= rest_tolerance x rest speed / 2, so that the approach gravity adds in one step is below the rest
         tolerance and resting piles converge in few sweeps."""
         dist = self.step_fraction * self._r_min
         vmax = math.sqrt(max(self._vmax2, 0.0))
@@ -336,8 +339,8 @@ class Simulation:
         h = math.inf if denom == 0.0 else 2.0 * dist / denom
         if self.features.supports and self._resting:
             # resting contact: gravity may add at most half the rest tolerance to an
-            # approach per step (see contacts.REST_TOLERANCE)
-            h = min(h, 0.5 * REST_TOLERANCE * self.rest_speed / self._g)
+            # approach per step (see config.Rules.rest_tolerance)
+            h = min(h, 0.5 * self.tuning.physics.rest_tolerance * self.rest_speed / self._g)
         return h
 
     def step(self, h: float) -> None:
@@ -425,7 +428,7 @@ class Simulation:
         """Push apart pairs overlapping beyond the tolerance (projection.py); returns
         the largest relative overlap the last iteration measured."""
         proj = self._projection
-        for it in range(MAX_ITERATIONS):
+        for it in range(self.tuning.physics.projection_iterations):
             self._grid.build()
             (proj.project_near if it else proj.project_all)()
             if float(proj.worst[None]) <= self.overlap_tolerance:
@@ -436,6 +439,20 @@ class Simulation:
         return float(proj.worst[None])
 
     # ---- the engine this Simulation runs on ----
+    def _engine_key(self) -> engines.EngineKey:
+        """What this Simulation's kernels compile in (engine.EngineKey): on the CPU,
+        loops run serially below the Performance thresholds (a parallel launch costs
+        ~150 us there)."""
+        cpu = self.runtime.is_cpu
+        n = self.scene.n
+        perf = self.tuning.performance
+        return engines.EngineKey(
+            generation=self.runtime.generation,
+            real=ti.f64 if self.precision == "f64" else ti.f32, features=self.features,
+            serial_light=cpu and n < perf.serial_light_below,
+            serial_heavy=cpu and n < perf.serial_heavy_below, serial_few=cpu,
+            near_lists=_keeps_near_lists(self.scene, self.geometry, perf), tuning=self.tuning)
+
     def _bind(self):
         """Load this Simulation into its engine's fields unless it is the one they hold."""
         if not self._engine.bound_to(self):

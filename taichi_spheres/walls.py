@@ -16,18 +16,17 @@ mirrored into the box and its inward velocity reflected; with gravity it is plac
 on the wall and the potential energy of that lift is taken from its normal kinetic
 energy, so the total never grows (counted in ``stats['wall_rests']``). A sphere
 that re-crosses within the same step (small e under gravity) bounces again, up to
-``MAX_WALL_BOUNCES`` times; if it is still past the wall then, it is put on the
+``Rules.max_wall_bounces`` times (taichi_spheres/config.py); if it is still past the wall then, it is put on the
 wall and its velocity into the wall is zeroed — a "wall rest" that never adds
 kinetic energy, counted in ``stats['wall_rests']``.
 """
 
 import taichi as ti
 
+from .config import DEFAULT, Tuning
 from .params import (E_REST, E_WALLS, FLOOR, MULTI, VMAX2, WALL_RESTED, WALLS, WALL_RESTS,
                      StepParams)
 from .state import Features, SphereState
-
-MAX_WALL_BOUNCES = 8
 
 
 @ti.data_oriented
@@ -35,12 +34,13 @@ class Motion:
     """Drift and wall kernels over a :class:`SphereState` (shapes: see SphereState)."""
 
     def __init__(self, state: SphereState, params: StepParams, features: Features,
-                 serial_light: bool):
+                 serial_light: bool, tuning: Tuning = DEFAULT):
         self.state = state
         self.params = params
         self.f = features
         self.real = state.real
         self.serial_light = serial_light
+        self.max_bounces = tuning.physics.max_wall_bounces
 
         # hot kernels as plain closures: a data_oriented method kernel pays ~40 us of
         # Python dispatch per launch for its `self` template argument
@@ -113,7 +113,7 @@ class Motion:
                         g_a = self.params.gravity[None][a]
                     lo_c = self.params.lo[None][a] + r
                     hi_c = self.params.hi[None][a] - r
-                    for bounce in range(MAX_WALL_BOUNCES + 1):
+                    for bounce in range(ti.static(self.max_bounces + 1)):
                         side = 0
                         d = ti.cast(0, self.real)
                         if x[a] < lo_c:
@@ -134,7 +134,7 @@ class Motion:
                         acc = g_a * side * -1
                         s = self._contact_time(d, w, acc, self.f.gravity_axes[a])
                         bounced = False
-                        if s >= 0 and s <= 2 * h and bounce < MAX_WALL_BOUNCES:
+                        if s >= 0 and s <= 2 * h and bounce < ti.static(self.max_bounces):
                             wc = w - acc * s
                             wn = self.rebound(i, -wc, e_w, floor)
                             dn = wn * s + ti.cast(0.5, self.real) * acc * s * s
@@ -147,7 +147,7 @@ class Motion:
                             ti.atomic_add(self.params.count[WALLS], 1)
                             self.count_hit(i)
                             bounced = True
-                        if not bounced and bounce < MAX_WALL_BOUNCES:
+                        if not bounced and bounce < ti.static(self.max_bounces):
                             # past the wall without a crossing on its current path: a
                             # pair collision carried it there, or it rests on the wall
                             mirror = True
@@ -183,7 +183,7 @@ class Motion:
                                 ti.atomic_add(self.params.count[WALL_RESTS], 1)
                             bounced = True
                         if not bounced:
-                            # still past the wall after MAX_WALL_BOUNCES: rest on it
+                            # still past the wall after max_bounces bounces: rest on it
                             if side < 0:
                                 x[a] = lo_c
                                 v[a] = ti.max(v[a], 0)

@@ -240,25 +240,21 @@ def test_bad_simulation_arguments(arch):
 
 def test_parallel_colour_launches_give_the_serial_bits(arch, monkeypatch):
     """The CPU resolves few pending pairs in one serial loop over the colours and many
-    (above contacts.SERIAL_RESOLVE_PAIRS) with one parallel launch per colour, as a GPU
+    (above Performance.serial_resolve_pairs) with one parallel launch per colour, as a GPU
     always does. Forced onto the parallel launches, an inelastic walled gas under
     gravity gives the same bits: within a colour no two threads touch one sphere. So
     does a run whose re-detections visit the touched spheres in list order instead of
-    cell order when few were touched (contacts.DENSE_TOUCHED = 64: more than 46 of the
+    cell order when few were touched (Performance.dense_touched = 64: more than 46 of the
     3,000 touched in cell order, fewer in list order: a step's first sweeps touch more,
     its last ones fewer)."""
-    from taichi_spheres import contacts
+    from taichi_spheres.config import DEFAULT
     scene = gas(3000, packing=0.3, periodic=(True, True, False), gravity=(0, 0, -9.81),
                 restitution=0.8, wall_restitution=0.9, seed=4)
     runs = []
-    for force in ("serial", "parallel", "list order"):
-        if force == "parallel":
-            monkeypatch.setattr(contacts, "FEW_PAIRS", -1)
-            monkeypatch.setattr(contacts, "SERIAL_RESOLVE_PAIRS", -1)
-        elif force == "list order":
-            monkeypatch.undo()
-            monkeypatch.setattr(contacts, "DENSE_TOUCHED", 64)
-        sim = ts.Simulation(scene, arch=arch)
+    tunings = {"serial": DEFAULT, "parallel": DEFAULT.with_(few_pairs=-1, serial_resolve_pairs=-1),
+               "list order": DEFAULT.with_(dense_touched=64)}
+    for force, tuning in tunings.items():
+        sim = ts.Simulation(scene, arch=arch, tuning=tuning)
         launches = []
         per_colour = sim._contacts.resolve_colour_parallel
         # (restored at the end: the engine's kernels serve later Simulations)

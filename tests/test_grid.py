@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import taichi_spheres as ts
-from taichi_spheres import contacts, simulation
+from taichi_spheres.config import DEFAULT
 from taichi_spheres.builders import gas
 from taichi_spheres.grid import BLOCK_PAIRS, GridGeometry
 
@@ -70,11 +70,10 @@ def test_grid_detection_matches_brute_force(arch, periodic, poly):
 
 @pytest.mark.parametrize("periodic,poly,prune", [(True, 0.0, True), ((True, False, True), 0.6, True),
                                                  (True, 0.0, False)])
-def test_walks_around_touched_spheres_match_brute_force(arch, precision, periodic, poly, prune,
-                                                       monkeypatch):
+def test_walks_around_touched_spheres_match_brute_force(arch, precision, periodic, poly, prune):
     """The walk around a touched sphere (Contacts.examine_around, which skips the cells
     across faces farther than r_i + r_max + M, M the farthest move since the grid was
-    built; with PRUNE_WALKS = False it walks all 27) finds every pair brute force
+    built; with prune_walks = False it walks all 27) finds every pair brute force
     finds: overlaps from a long free flight, then every sphere moved by M after
     binning (all alike, so that many pairs reach across a face only by that move), and
     every sphere touched (each pair is then examined once, from its lower id). Leaving
@@ -82,9 +81,9 @@ def test_walks_around_touched_spheres_match_brute_force(arch, precision, periodi
     import taichi as ti
     from taichi_spheres.params import MOVED, REMAINING
 
-    monkeypatch.setattr(contacts, "PRUNE_WALKS", prune)
     scene = _overlapping_scene(3000, periodic, seed=4, poly=poly)
-    sim = ts.Simulation(scene, arch=arch, precision=precision)
+    sim = ts.Simulation(scene, arch=arch, precision=precision,
+                        tuning=DEFAULT.with_(prune_walks=prune))
     h = (60 if poly else 20) * sim.max_step()
     sim._params.h[None] = h
     sim._motion.drift()
@@ -183,13 +182,12 @@ def test_compiled_colour_loops_touch_each_sphere_once(arch, periodic):
 
 
 @pytest.mark.parametrize("parallel", [False, True])
-def test_grid_order_is_sorted_and_complete(arch, parallel, monkeypatch):
+def test_grid_order_is_sorted_and_complete(arch, parallel):
     """Both ways of building (on the CPU below 200,000 spheres a serial scatter in id
     order that also copies the positions; else a parallel scatter, a sort of each cell
     and a copy) give cells sorted by id, each sphere's slot, and its position in xs."""
-    if parallel:
-        monkeypatch.setattr(simulation, "_SERIAL_LIGHT_BELOW", 0)
-    sim = ts.Simulation(gas(500, periodic=False, gravity=(0, 0, 0)), arch=arch)
+    tuning = DEFAULT.with_(serial_light_below=0) if parallel else DEFAULT
+    sim = ts.Simulation(gas(500, periodic=False, gravity=(0, 0, 0)), arch=arch, tuning=tuning)
     assert sim._grid.serial_light == (sim.runtime.is_cpu and not parallel)
     sim._grid.build()
     n = sim.n      # (the fields may have room for more spheres and cells)
@@ -232,10 +230,10 @@ def test_row_stencils_cover_the_half_and_full_stencils():
 def test_cell_size_rules():
     """Cells: at least 2 r_max + 4 x (step_fraction r_min) where the box allows it (a
     collision carried forward can move a sphere by twice a step's largest move), down
-    to 2 r_max + 2 x that on a short periodic axis; at most about MAX_CELLS_PER_SPHERE
+    to 2 r_max + 2 x that on a short periodic axis; at most about max_cells_per_sphere
     cells per sphere in dilute scenes; with fewer, larger cells the margin (slack) is
     what the cells leave beyond a diameter."""
-    from taichi_spheres.grid import MAX_CELLS_PER_SPHERE
+    MAX_CELLS_PER_SPHERE = DEFAULT.performance.max_cells_per_sphere
     r, f = 0.5, 0.1
     dense = GridGeometry.for_box((0, 0, 0), (60, 60, 60), (True,) * 3, r, r, 200_000, f)
     assert min(dense.cell) >= 2 * r + 4 * f * r
@@ -252,19 +250,19 @@ def test_cell_size_rules():
         GridGeometry.for_box((0, 0, 0), (3.2, 3.4, 3.4), (True,) * 3, r, r, 20, f)
 
 
-def _runs_with_and_without_near_lists(scene, arch, monkeypatch, duration, capacities=(None,)):
+def _runs_with_and_without_near_lists(scene, arch, duration, capacities=(None,)):
     """(state, stats) of ``scene`` advanced by ``duration`` [s] with near lists (one run
     per list capacity, None: the default), then without (every detection scans)."""
     runs = []
     for capacity in capacities + ("scan",):
-        if capacity not in (None, "scan"):
-            monkeypatch.setattr(contacts, "NEAR_CAPACITY", capacity)
-        lists_from = scene.n + 1 if capacity == "scan" else ts.simulation.NEAR_LISTS_FROM
-        monkeypatch.setattr(ts.simulation, "NEAR_LISTS_FROM", lists_from)
-        sim = ts.Simulation(scene, arch=arch)
+        tuning = DEFAULT
+        if capacity == "scan":
+            tuning = DEFAULT.with_(near_lists_from=scene.n + 1)
+        elif capacity is not None:
+            tuning = DEFAULT.with_(near_capacity=capacity)
+        sim = ts.Simulation(scene, arch=arch, tuning=tuning)
         sim.advance(duration)
         runs.append((sim.state(), sim.stats))
-        monkeypatch.undo()
     return runs
 
 
@@ -277,7 +275,7 @@ def _assert_same_run(a, b):
         assert ta[key] == tb[key], key
 
 
-def test_near_lists_give_the_scan_bits_in_a_gas(arch, monkeypatch):
+def test_near_lists_give_the_scan_bits_in_a_gas(arch):
     """Detections from near lists (Contacts.detect) find what the full grid scan finds:
     an elastic periodic gas runs to the same bits and counts with and without them.
     Lists serve most steps, longer than the two steps for which no sphere outruns
@@ -285,7 +283,7 @@ def test_near_lists_give_the_scan_bits_in_a_gas(arch, monkeypatch):
     path); lists that overflow their capacity are not used (and change nothing)."""
     scene = gas(3500, packing=0.3, seed=5)
     lists, overflowing, scan = _runs_with_and_without_near_lists(
-        scene, arch, monkeypatch, 1.0, capacities=(None, 1))
+        scene, arch, 1.0, capacities=(None, 1))
     steps = scan[1]["steps"]
     assert steps > 50 and scan[1]["pair_collisions"] > 5 * scene.n
     assert scan[1]["near_list_detections"] == 0
@@ -295,21 +293,21 @@ def test_near_lists_give_the_scan_bits_in_a_gas(arch, monkeypatch):
     _assert_same_run(overflowing, scan)
 
 
-def test_near_lists_give_the_scan_bits_with_walls_and_gravity(arch, monkeypatch):
+def test_near_lists_give_the_scan_bits_with_walls_and_gravity(arch):
     """The same with walls, gravity, inelastic pairs and walls and radii (and so masses)
     spread over a factor 2: the lists' reach is set by the largest sphere, and the
     orientation of a pair found from a list or around a fast mover is the scan's."""
     scene = gas(3500, packing=0.2, periodic=(False, True, False), gravity=(0, 0, -9.81),
                 restitution=0.7, wall_restitution=0.8, polydispersity=0.5, seed=6)
-    lists, scan = _runs_with_and_without_near_lists(scene, arch, monkeypatch, 0.5)
+    lists, scan = _runs_with_and_without_near_lists(scene, arch, 0.5)
     assert lists[1]["near_list_detections"] > 0
     assert scan[1]["wall_collisions"] > 0 and scan[1]["pair_collisions"] > scene.n
     _assert_same_run(lists, scan)
 
 
-def test_recorded_pairs_resolve_as_the_block_search(arch, precision, monkeypatch):
+def test_recorded_pairs_resolve_as_the_block_search(arch, precision):
     """A cell that detection found two pairs for resolves them from its record
-    (Contacts.earliest_recorded) as searching its block does (RECORDED_PAIRS = 1 sends
+    (Contacts.earliest_recorded) as searching its block does (recorded_pairs = 1 sends
     every such cell to earliest_in_block): the same collisions, earliest first, in a
     dense elastic gas where such cells are common, to the bit (a recorded pair keeps
     the order the forward scan met its spheres in, which is the block's order)."""
@@ -322,11 +320,10 @@ def test_recorded_pairs_resolve_as_the_block_search(arch, precision, monkeypatch
     assert np.count_nonzero(probe._contacts.active.to_numpy() == 2) > 10
     runs = []
     for recorded in (2, 1):
-        monkeypatch.setattr(contacts, "RECORDED_PAIRS", recorded)
-        sim = ts.Simulation(scene, arch=arch, precision=precision)
+        sim = ts.Simulation(scene, arch=arch, precision=precision,
+                            tuning=DEFAULT.with_(recorded_pairs=recorded))
         for _ in range(10):
             sim.step(sim.max_step())
         runs.append((sim.state(), sim.stats))
-        monkeypatch.undo()
     assert runs[0][1]["pair_collisions"] > scene.n
     _assert_same_run(*runs)

@@ -21,8 +21,9 @@ import os
 import pytest
 
 import taichi_spheres as ts
-from taichi_spheres import contacts, runtime
+from taichi_spheres import runtime
 from taichi_spheres.builders import same_bits_scene
+from taichi_spheres.config import DEFAULT
 
 with open(os.path.join(os.path.dirname(__file__), "same_bits.json")) as _f:
     STORED = json.load(_f)
@@ -61,9 +62,8 @@ def test_parallel_colour_launches_give_the_stored_digest(arch, monkeypatch):
     """From 3,000 spheres on, the CPU may launch a sweep per colour in parallel (as a GPU
     always does); forced onto those launches, the large case keeps its digest."""
     _cpu_only(arch)
-    monkeypatch.setattr(contacts, "FEW_PAIRS", -1)
-    monkeypatch.setattr(contacts, "SERIAL_RESOLVE_PAIRS", -1)
-    digest, sim = _digest("large", "f64")
+    digest, sim = _digest("large", "f64",
+                          tuning=DEFAULT.with_(few_pairs=-1, serial_resolve_pairs=-1))
     launches = []
     per_colour = sim._contacts.resolve_colour_parallel
     # (restored at the end: the engine's kernels serve later Simulations)

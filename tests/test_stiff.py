@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 import taichi_spheres as ts
-from taichi_spheres import projection
+from taichi_spheres.config import DEFAULT
 from taichi_spheres.builders import gas
-from taichi_spheres.contacts import REST_TOLERANCE
 from taichi_spheres.scenefile import scene_from_dict
 from conftest import tol, tol_for
 
@@ -84,10 +83,10 @@ def test_stacked_column_comes_to_rest(arch, precision):
         sim.advance_to(t)
         energies.append(ts.observe.total_energy(sim.state(), scene.gravity))
     st = _check_rest(sim, scene, energies, 0.005, 0.01)
-    # at rest = speeds at the scale of the rest tolerance v_tol (contacts.REST_TOLERANCE
+    # at rest = speeds at the scale of the rest tolerance v_tol (config.Rules.rest_tolerance
     # x rest speed): a resting sphere creeps until its approach exceeds v_tol, and
     # gravity adds at most v_tol / 2 per step
-    v_tol = REST_TOLERANCE * sim.rest_speed
+    v_tol = sim.tuning.physics.rest_tolerance * sim.rest_speed
     assert ts.observe.kinetic_energy(st) < 0.5 * scene.mass.sum() * (2 * v_tol) ** 2
     assert sim.stats["sweep_limit_hits"] == 0
     assert np.all(np.abs(st.x[:, :2] - 0.5) < 1e-9), "the column stays straight"
@@ -125,19 +124,19 @@ def test_poured_pile_comes_to_rest(arch):
     assert kinetic[-1] < 1e-3 * max(kinetic)
 
 
-def test_fused_step_and_projection_near_sets_match_kernel_by_kernel(arch, monkeypatch):
+def test_fused_step_and_projection_near_sets_match_kernel_by_kernel(arch):
     """A forming pile (sweep-limit steps, projections, wall placements) gives the same
     bits and the same counters (pushed pairs, largest overlap) in three builds: the
     step launched kernel by kernel; the same with the projection scanning every sphere
     in every iteration instead of only those near the spheres involved before
-    (projection.NEAR_SETS); and, on the CPU, the fused step (fused.py, one or two
+    (Performance.projection_near_sets); and, on the CPU, the fused step (fused.py, one or two
     kernels per step, projection included)."""
     runs = {}
     for name in ("kernels", "full scans", "fused"):
         if name == "fused" and arch != "cpu":
             continue        # the fused step is for the CPU
-        monkeypatch.setattr(projection, "NEAR_SETS", name != "full scans")
-        sim = ts.Simulation(_pour(120), arch=arch, fused=name == "fused")
+        tuning = DEFAULT.with_(projection_near_sets=name != "full scans")
+        sim = ts.Simulation(_pour(120), arch=arch, fused=name == "fused", tuning=tuning)
         assert sim.fused == (name == "fused")
         assert sim._projection.near_sets == (name != "full scans")
         sim.advance(0.6)

@@ -6,7 +6,6 @@ import math
 import os
 import signal
 
-import numpy as np
 import pytest
 
 import taichi_spheres as ts

@@ -1,31 +1,28 @@
 #!/usr/bin/env python3
-"""Paired A/B timing of a tuning constant of the engine, in one process.
+"""Paired A/B timing of a tuning field of the engine (taichi_spheres/config.py), in one
+process.
 
 Builds two Simulations of the same elastic gas (tools/bench.py's scene: packing 0.3,
-periodic cube), the second with module constants patched while it is built, compiles
-and steps (the patches are active around every step of B, so constants read at
-construction, at compile time through ``ti.static`` or in Python per step all take
-the new value; a constant another module imported by name is not reached), then
+periodic cube), the second with ``tuning=config.DEFAULT.with_(NAME=value, ...)``,
+compiles and steps both, then
 times blocks of --block consecutive steps alternately, A then B then B then A, ...,
 so that the drift of a shared machine's speed (+-25 % from minute to minute here)
 hits both alike (a block holds whole cycles of full scans and near-list detections,
 which single steps would pair against each other). Reports the median of the ratios
 B/A per pair of blocks with its quartiles (quartiles on both sides of 1 mean the
 difference is within the noise), the ratio of the total times, and whether both runs
-made the same collisions (tuning constants change speed, not physics).
+made the same collisions (performance fields change speed, not physics).
 
-    python tools/ab_step.py --n 100000 contacts.DENSE_TOUCHED=1
-    python tools/ab_step.py --n 100000 --shuffle contacts.DENSE_TOUCHED=1
+    python tools/ab_step.py --n 100000 dense_touched=1
+    python tools/ab_step.py --n 100000 --shuffle dense_touched=1 prune_walks=False
 
 --shuffle numbers the spheres in random order (the bench's lattice numbers them in
 about the grid's cell order, which favours memory locality).
 """
 import argparse
-import importlib
 import os
 import sys
 import time
-from unittest import mock
 
 import numpy as np
 
@@ -35,8 +32,8 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("patches", nargs="+", metavar="module.NAME=value",
-                    help="constants of taichi_spheres modules to set for run B")
+    ap.add_argument("patches", nargs="+", metavar="NAME=value",
+                    help="fields of taichi_spheres.config.Tuning to set for run B")
     ap.add_argument("--n", type=int, default=100_000)
     ap.add_argument("--steps", type=int, default=60, help="timed steps per run")
     ap.add_argument("--block", type=int, default=10,
@@ -50,32 +47,19 @@ def main():
     from taichi_spheres import runtime
     from taichi_spheres.builders import gas
 
-    patches = []
+    from taichi_spheres.config import DEFAULT
+    changes = {}
     for item in args.patches:
         name, _, value = item.partition("=")
-        mod, _, attr = name.rpartition(".")
-        try:
-            module = importlib.import_module(f"taichi_spheres.{mod}") if mod else None
-        except ImportError:
-            module = None
-        if module is None or not attr.isupper() or not hasattr(module, attr):
-            ap.error(f"{name}: not a constant of a taichi_spheres module (e.g. contacts.DENSE_TOUCHED)")
         if not value:
             ap.error(f"{name}: give a value, as {name}=VALUE")
-        default = getattr(module, attr)
-        kind = type(default)
         try:
-            if kind is bool:
-                if value not in ("True", "False"):
-                    raise ValueError
-                new = value == "True"
-            else:
-                new = kind(value)
-        except ValueError:
-            ap.error(f"{name}: {value!r} is not a {kind.__name__}")
-        if kind in (int, float) and default > 0 and new <= 0:
-            ap.error(f"{name}: must stay positive (default {default})")
-        patches.append(mock.patch.object(module, attr, new))
+            default = getattr(DEFAULT.physics, name, getattr(DEFAULT.performance, name, None))
+            changes[name] = (value == "True") if isinstance(default, bool) else \
+                type(default)(value) if default is not None else value
+            tuning_b = DEFAULT.with_(**changes)
+        except ValueError as err:
+            ap.error(f"{item}: {err}")
 
     runtime.ensure("cpu", args.precision)
     scene = gas(args.n)
@@ -83,20 +67,10 @@ def main():
         p = np.random.default_rng(1).permutation(args.n)
         scene = ts.Scene.from_arrays(scene.x[p], scene.v[p], scene.radius[p],
                                      box=(scene.box_lo, scene.box_hi), periodic=scene.periodic)
-    def patched(k, fn):
-        """fn() with run k's constants in place (run 1 = B)."""
-        for p in patches if k else []:
-            p.start()
-        try:
-            return fn()
-        finally:
-            for p in reversed(patches) if k else []:
-                p.stop()
-
-    sims = [patched(k, lambda: ts.Simulation(scene, precision=args.precision)) for k in range(2)]
-    for k, sim in enumerate(sims):
+    sims = [ts.Simulation(scene, precision=args.precision, tuning=t) for t in (DEFAULT, tuning_b)]
+    for sim in sims:
         for _ in range(5):      # compiles (most of) its kernels
-            patched(k, lambda: sim.step(sim.max_step()))
+            sim.step(sim.max_step())
     # blocks of consecutive steps, so that each block holds whole cycles of full scans
     # and near-list detections (single steps of A and B would pair a scan with a list)
     times = [[], []]
@@ -106,8 +80,7 @@ def main():
             ti.sync()
             t0 = time.perf_counter()
             for _ in range(args.block):
-                h = sim.max_step()
-                patched(k, lambda: sim.step(h))
+                sim.step(sim.max_step())
             ti.sync()
             times[k].append((time.perf_counter() - t0) / args.block)
     a, b = (np.array(t) * 1e3 for t in times)

@@ -44,18 +44,15 @@ def run_path(case: dict, precision: str, path: str, threads=None, compile=None) 
     launch per colour, as on a GPU: from 3,000 spheres on)."""
     sys.path.insert(0, ROOT)
     import taichi_spheres as ts
-    from taichi_spheres import contacts, runtime
+    from taichi_spheres import runtime
     from taichi_spheres.builders import same_bits_scene
+    from taichi_spheres.config import DEFAULT
     runtime.ensure("cpu", precision, threads=threads, compile=compile)
-    saved = (contacts.FEW_PAIRS, contacts.SERIAL_RESOLVE_PAIRS)
-    if path == "parallel":
-        contacts.FEW_PAIRS = contacts.SERIAL_RESOLVE_PAIRS = -1
-    try:
-        sim = ts.Simulation(same_bits_scene(case["n"]), precision=precision,
-                            threads=threads, fused=path == "fused")
-        sim.advance(case["duration"])
-    finally:
-        contacts.FEW_PAIRS, contacts.SERIAL_RESOLVE_PAIRS = saved
+    tuning = DEFAULT.with_(few_pairs=-1, serial_resolve_pairs=-1) if path == "parallel" \
+        else DEFAULT
+    sim = ts.Simulation(same_bits_scene(case["n"]), precision=precision, threads=threads,
+                        fused=path == "fused", tuning=tuning)
+    sim.advance(case["duration"])
     s = sim.stats
     return dict(precision=precision, path=path, compile=sim.runtime.compile,
                 digest=ts.observe.state_digest(sim.state(), precision), steps=s["steps"],

@@ -1,0 +1,141 @@
+"""Tuning: every constant of the engine in one options object, in two named groups.
+
+``Tuning(physics=Rules(...), performance=Performance(...))``, passed as
+``Simulation(scene, tuning=...)`` (default: ``Tuning()``). The *physics rules* change
+results (rest and collapse rules, overlap projection, wall bounces); the *performance*
+knobs change only speed and memory (loop variants, list sizes, grid shape): the same
+bits whatever their values (tests run both sides of each). Kernels compile the values
+in (``ti.static``), so Simulations with other values run on another engine
+(engine.py). ``Tuning().with_(dense_touched=64)`` returns a copy with fields of
+either group replaced by name.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+__all__ = ["Rules", "Performance", "Tuning", "DEFAULT"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Rules:
+    """Physics rules of resting contact and inelastic collapse (docs/resting.md).
+
+    rest_speed_factor: automatic rest speed under gravity, in units of sqrt(2 g D) with
+        D = step_fraction x smallest radius (the largest speed gravity adds to a pair in
+        one step); bounces slower than the rest speed are perfectly inelastic.
+    rest_tolerance: approaches of a resting contact slower than this fraction of the
+        rest speed are not collided (repeated e = 0 collisions in a resting pile shrink
+        the residual approach geometrically and would otherwise go on to round-off).
+    support_cos: cosine of the widest angle from vertical at which a slow contact counts
+        as resting on a support (about 66 degrees: a sphere in the groove of two
+        touching spheres, at 60 degrees, still does).
+    collapse_hits: from a sphere's collapse_hits-th collision in one step on, its
+        collisions are perfectly inelastic in the normal direction (inelastic pairs
+        only; a time-stepped stand-in for the TC model of Luding & McNamara 1998).
+    max_wall_bounces: bounces of one sphere on one wall within a step before it is put
+        to rest on the wall.
+    overlap_tolerance: relative overlap above which the projection pushes pairs apart.
+    projection_iterations: Jacobi iterations of the projection per step at most.
+    projection_relaxation: fraction of every pair's overlap one iteration removes.
+    """
+
+    rest_speed_factor: float = 2.0
+    rest_tolerance: float = 0.03
+    support_cos: float = 0.4
+    collapse_hits: int = 4
+    max_wall_bounces: int = 8
+    overlap_tolerance: float = 1e-4
+    projection_iterations: int = 8
+    projection_relaxation: float = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class Performance:
+    """Speed and memory knobs; results do not depend on them (same bits).
+
+    serial_light_below: below this many spheres the CPU runs light loops (drift, grid
+        build) serially: a parallel launch costs ~150 us there, more than the loop.
+    serial_heavy_below: below this many spheres the CPU runs every loop serially
+        (detection and sweeps too), and the fused step is available.
+    near_lists_from: from this many spheres on, detection keeps near lists.
+    few_pairs: below this many pending pairs a CPU sweep runs its loops serially.
+    serial_resolve_pairs: below this many, a CPU sweep still resolves serially (one
+        launch for all colours) but detects in parallel; above, one launch per colour.
+    max_block_collisions: collisions one owner cell resolves in one sweep at most.
+    recorded_pairs: pairs (1 or 2) an owner cell keeps from detection; a cell with
+        no more pairs resolves them from the record instead of searching its block.
+    dense_touched: a re-detection visits the touched spheres in cell order when more
+        than 1 in this many were touched, else in list order.
+    near_capacity: forward neighbours a near list keeps per sphere.
+    near_safety: part of the move budget of a near list that is used (the rest
+        absorbs round-off).
+    near_fast_limit: a detection from near lists scans everything instead when more
+        than 1 in this many spheres moved past the allowance.
+    prune_walks: walks around one sphere skip the neighbour cells it cannot reach
+        (False: all 27).
+    projection_near_sets: later projection iterations examine only the neighbourhood
+        of the spheres involved before (False: every sphere every iteration).
+    scan_block: items per block of the grid's prefix scan.
+    max_cells_per_sphere: at most about this many grid cells per sphere.
+    wide_margin: cells aim at the largest diameter plus this many times the largest
+        move per step.
+    """
+
+    serial_light_below: int = 200_000
+    serial_heavy_below: int = 3_000
+    near_lists_from: int = 3_000
+    few_pairs: int = 1000
+    serial_resolve_pairs: int = 50_000
+    max_block_collisions: int = 64
+    recorded_pairs: int = 2
+    dense_touched: int = 4096
+    near_capacity: int = 16
+    near_safety: float = 0.99
+    near_fast_limit: int = 8
+    prune_walks: bool = True
+    projection_near_sets: bool = True
+    scan_block: int = 1024
+    max_cells_per_sphere: float = 8.0
+    wide_margin: float = 4.0
+
+
+@dataclasses.dataclass(frozen=True)
+class Tuning:
+    """The engine's options: ``physics`` (Rules) and ``performance`` (Performance)."""
+
+    physics: Rules = Rules()
+    performance: Performance = Performance()
+
+    def with_(self, **changes) -> "Tuning":
+        """A copy with the named fields of either group replaced (ValueError for an
+        unknown name or a value of the wrong type)."""
+        groups = {"physics": {}, "performance": {}}
+        for name, value in changes.items():
+            group = next((g for g in groups if name in _field_names(getattr(self, g))), None)
+            if group is None:
+                raise ValueError(f"unknown tuning field {name!r}; fields: "
+                                 f"{', '.join(sorted(_field_names(self.physics) | _field_names(self.performance)))}")
+            default = getattr(getattr(self, group), name)
+            if not _fits(value, default):
+                raise ValueError(f"tuning {name} must be {type(default).__name__}, got {value!r}")
+            groups[group][name] = type(default)(value)
+        return Tuning(physics=dataclasses.replace(self.physics, **groups["physics"]),
+                      performance=dataclasses.replace(self.performance, **groups["performance"]))
+
+
+def _fits(value, default) -> bool:
+    """value can stand for default: a bool for a bool, an int for an int, a number for a
+    float."""
+    if isinstance(default, bool) or isinstance(value, bool):
+        return isinstance(value, bool) and isinstance(default, bool)
+    if isinstance(default, int):
+        return isinstance(value, int)
+    return isinstance(value, (int, float))
+
+
+def _field_names(group) -> set:
+    return {f.name for f in dataclasses.fields(group)}
+
+
+#: The default options.
+DEFAULT = Tuning()
