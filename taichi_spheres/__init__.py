@@ -2,8 +2,10 @@
 
 Importing the package never initialises Taichi, nor imports it: :class:`Scene`,
 :func:`load_scene` and :mod:`observe` are plain numpy, and the names that need Taichi
-(:class:`Simulation`, :class:`State`) import it on first use. :class:`Simulation`
-initialises Taichi for the arch it is asked to run on.
+(:class:`Simulation`, :class:`State`) import it on first use, as do the names of the
+trajectory and sweep modules (:class:`GSDWriter`, :func:`scene_from_gsd`,
+:func:`sweep`), which import gsd or Dask. :class:`Simulation` initialises Taichi for the
+arch it is asked to run on.
 """
 import importlib
 import importlib.util
@@ -12,11 +14,13 @@ from .scene import Scene
 from .scenefile import load_scene
 from . import observe
 
-__all__ = ["Scene", "Simulation", "State", "load_scene", "observe", "__version__"]
+__all__ = ["Scene", "Simulation", "State", "load_scene", "observe", "GSDWriter",
+           "scene_from_gsd", "sweep", "__version__"]
 __version__ = "0.1.0"
 
 #: public names imported from their module on first use (those modules import Taichi)
-_LAZY = {"Simulation": ".simulation", "State": ".state"}
+_LAZY = {"Simulation": ".simulation", "State": ".state", "GSDWriter": ".trajectory",
+         "scene_from_gsd": ".trajectory", "sweep": ".sweeps"}
 
 
 def __getattr__(name):

@@ -1,8 +1,9 @@
-"""Command line: ``taichi-spheres run SCENE`` and ``taichi-spheres info SCENE``.
+"""Command line: ``taichi-spheres run SCENE``, ``info SCENE`` and ``sweep SCENE``.
 
-Exit codes: 0 done, 2 bad input (scene, options, output path, a run far beyond what
-real scenes need: see workload.MAX_STEPS), 3 rendering not available, 130 interrupted
-(the frames written so far are kept, playable).
+Exit codes: 0 done, 1 some runs of a sweep failed (their rows say why), 2 bad input
+(scene, options, output path, a run far beyond what real scenes need: see
+workload.MAX_STEPS), 3 rendering not available, 130 interrupted (the frames or sweep
+rows written so far are kept).
 
 Parsing the command line, ``--help`` and reading the scene do not import Taichi; the
 engine is imported when ``info`` or ``run`` needs it. Details: docs/cli.md.
@@ -24,6 +25,7 @@ from .progress import STATUS_EVERY, Progress, status_reports
 from .scene import Scene
 from .scenefile import load_scene
 
+EXIT_RUNS_FAILED = 1
 EXIT_BAD_INPUT = 2
 EXIT_NO_RENDER = 3
 EXIT_INTERRUPTED = 130
@@ -100,7 +102,42 @@ def build_parser():
                       help="time a few steps on this machine for the wall-time estimate "
                            "(compiles the kernels: seconds); without it the estimate uses "
                            "reference figures")
+    _add_sweep_arguments(sub.add_parser(
+        "sweep", formatter_class=_HelpFormatter,
+        help="run a scene once per combination of parameter values (on Dask), one CSV row "
+             "per run"))
     return p
+
+
+def _add_sweep_arguments(sweep):
+    sweep.add_argument("scene", help="scene file (TOML)")
+    sweep.add_argument("--set", action="append", default=[], metavar="KEY=V1,V2,...",
+                       dest="grid", required=True,
+                       help="values of one parameter (repeat for more: every combination "
+                            "runs), e.g. restitution=0.5,0.7,0.9 or step_fraction=0.1,0.03; "
+                            "keys: arguments of Scene.from_arrays (restitution, "
+                            "wall_restitution, gravity=[0,0,-9.81], ...) and step_fraction, "
+                            "max_sweeps, precision, fused")
+    sweep.add_argument("--duration", type=_positive(float), default=None,
+                       help=f"simulated seconds per run (default: the scene's [run] duration, "
+                            f"else {DEFAULT_DURATION})")
+    sweep.add_argument("--out", default=None, metavar="PATH.csv",
+                       help="CSV written as runs finish (default: out/<scene name>-sweep.csv)")
+    sweep.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="a Dask scheduler to run on (tcp://host:8786); default: a local "
+                            "cluster of --workers processes")
+    sweep.add_argument("--workers", type=_positive(int), default=None,
+                       help="worker processes of the local cluster (default: one per core)")
+    sweep.add_argument("--serial", action="store_true",
+                       help="run here, one run after another, without Dask")
+    sweep.add_argument("--threads", type=_positive(int), default=1,
+                       help="Taichi CPU threads per run")
+    sweep.add_argument("--arch", default="cpu", choices=ARCHS, help="where the kernels run")
+    sweep.add_argument("--precision", default=None, choices=["f32", "f64"],
+                       help="default: the scene's, else the arch's")
+    sweep.add_argument("--compile", default="auto", choices=COMPILE_CHOICES,
+                       help="how Taichi compiles the kernels (as for run)")
+    sweep.add_argument("--quiet", action="store_true", help="no line per finished run")
 
 
 def _add_run_arguments(run):
@@ -120,6 +157,12 @@ def _add_run_arguments(run):
     run.add_argument("--no-video", action="store_true", help="diagnostics only, no rendering")
     run.add_argument("--npz", action="store_true",
                      help="also write OUT.npz with positions and velocities of every frame")
+    run.add_argument("--trajectory", default=None, metavar="PATH.gsd",
+                     help="also write a GSD trajectory (HOOMD schema: OVITO, freud, "
+                          "MDAnalysis read it), one frame per video frame or --every")
+    run.add_argument("--every", type=_positive(int), default=None, metavar="STEPS",
+                     help="write a trajectory frame every STEPS steps instead of one per "
+                          "video frame")
     run.add_argument("--checkpoint-every", type=_positive(int), default=None, metavar="FRAMES",
                      help="write OUT.ckpt.npz every FRAMES frames (overwritten each time)")
     run.add_argument("--resume", default=None, metavar="CHECKPOINT",
@@ -154,6 +197,8 @@ def main(argv=None):
         return EXIT_BAD_INPUT
     if args.command == "info":
         return cmd_info(scene, args)
+    if args.command == "sweep":
+        return cmd_sweep(scene, args)
     return cmd_run(scene, args)
 
 
@@ -271,6 +316,8 @@ class RunSettings:
     checkpoint_every: int | None
     step_fraction: float
     max_sweeps: int
+    trajectory: str | None = None
+    trajectory_every: int | None = None
 
     @property
     def stem(self):
@@ -309,7 +356,9 @@ def run_settings(scene: Scene, args) -> RunSettings:
         video_path=video_path, npz=args.npz or output.get("snapshots", False),
         checkpoint_every=args.checkpoint_every or output.get("checkpoint_every"),
         step_fraction=physics.get("step_fraction", DEFAULT_STEP_FRACTION),
-        max_sweeps=physics.get("max_sweeps", DEFAULT_MAX_SWEEPS))
+        max_sweeps=physics.get("max_sweeps", DEFAULT_MAX_SWEEPS),
+        trajectory=args.trajectory or output.get("trajectory"),
+        trajectory_every=args.every or output.get("trajectory_every"))
 
 
 def _check_outputs(settings: RunSettings, no_video):
@@ -317,8 +366,13 @@ def _check_outputs(settings: RunSettings, no_video):
     from .output import check_writable
     if not settings.video_path.lower().endswith(".mp4"):
         raise ValueError(f"output must end in .mp4, got {settings.video_path}")
+    if settings.trajectory is not None and not settings.trajectory.lower().endswith(".gsd"):
+        raise ValueError(f"--trajectory must end in .gsd, got {settings.trajectory}")
+    if settings.trajectory_every and settings.trajectory is None:
+        raise ValueError("--every (steps between trajectory frames) needs --trajectory PATH.gsd")
     for path in [settings.csv_path] + ([] if no_video else [settings.video_path]) + \
-            ([settings.npz_path] if settings.npz else []):
+            ([settings.npz_path] if settings.npz else []) + \
+            ([settings.trajectory] if settings.trajectory else []):
         check_writable(path)
 
 
@@ -382,9 +436,10 @@ def _print_timing(sim, settings, work, start_frame):
 
 
 class RunOutputs:
-    """The files a run writes frame by frame: video, diagnostics CSV, snapshots, checkpoint."""
+    """The files a run writes frame by frame: video, diagnostics CSV, snapshots, GSD
+    trajectory, checkpoint. A frame goes to all of them or (Ctrl-C) to none."""
 
-    def __init__(self, scene, settings: RunSettings, renderer, start_frame):
+    def __init__(self, scene, settings: RunSettings, renderer, start_frame, sim):
         from . import checkpoint
         from .output import DiagnosticsWriter, VideoWriter
         self.scene, self.settings, self.renderer = scene, settings, renderer
@@ -392,6 +447,7 @@ class RunOutputs:
             if renderer is not None and start_frame else None
         self.video = VideoWriter(settings.video_path, settings.fps) if renderer else None
         self.diag = DiagnosticsWriter(settings.csv_path, scene.gravity, keep_frames=start_frame)
+        self.trajectory, self.step_frames = _trajectory_outputs(settings, sim, start_frame)
         self.snaps = ([], [], [])
         self.render_seconds = 0.0
         self.start_frame = start_frame
@@ -402,20 +458,33 @@ class RunOutputs:
             checkpoint.copy_video_prefix(self.earlier, self.video, self.start_frame)
 
     def write(self, frame, sim):
+        """Render frame ``frame`` of ``sim``, then write it to every output with Ctrl-C
+        held, so that an interrupt leaves all files at the same frame."""
         from . import checkpoint
         st = sim.state()
-        self.diag.write(frame, st, sim.stats)
-        if self.settings.npz:
-            for store, value in zip(self.snaps, (st.x.astype(np.float32),
-                                                 st.v.astype(np.float32), st.time)):
-                store.append(value)
-        if self.video is not None:
-            t0 = time.perf_counter()
-            self.video.write(self.renderer.frame(st))
-            self.render_seconds += time.perf_counter() - t0
-        every = self.settings.checkpoint_every
-        if every and (frame + 1) % every == 0:
-            checkpoint.save(self.settings.ckpt_path, sim, self.scene, frame, self.settings.fps)
+        t0 = time.perf_counter()
+        rgb = self.renderer.frame(st) if self.video is not None else None
+        with hold_interrupts():
+            self.diag.write(frame, st, sim.stats)
+            if self.settings.npz:
+                for store, value in zip(self.snaps, (st.x.astype(np.float32),
+                                                     st.v.astype(np.float32), st.time)):
+                    store.append(value)
+            if rgb is not None:
+                self.video.write(rgb)
+                self.render_seconds += time.perf_counter() - t0
+            self._write_trajectory(sim)
+            every = self.settings.checkpoint_every
+            if every and (frame + 1) % every == 0:
+                checkpoint.save(self.settings.ckpt_path, sim, self.scene, frame,
+                                self.settings.fps)
+
+    def _write_trajectory(self, sim):
+        """One GSD frame per video frame, or the frame --every steps made due."""
+        if self.step_frames is not None:
+            self.step_frames.flush()
+        elif self.trajectory is not None:
+            self.trajectory.append(sim)
 
     def close(self):
         """Close every file (Ctrl-C held meanwhile) and say which were written."""
@@ -424,6 +493,10 @@ class RunOutputs:
             if self.video is not None:
                 self.video.close()
             self.diag.close()
+            if self.step_frames is not None:
+                self.step_frames.detach()
+            if self.trajectory is not None:
+                self.trajectory.close()
             if s.npz and self.snaps[0]:
                 np.savez_compressed(s.npz_path, x=np.stack(self.snaps[0]),
                                     v=np.stack(self.snaps[1]), time=np.array(self.snaps[2]),
@@ -432,8 +505,22 @@ class RunOutputs:
                 self.renderer.close()
             written = [p for p, on in ((s.video_path, self.video is not None), (s.csv_path, True),
                                        (s.npz_path, s.npz and bool(self.snaps[0])),
+                                       (s.trajectory, self.trajectory is not None),
                                        (s.ckpt_path, bool(s.checkpoint_every))) if on]
             print(f"wrote {', '.join(written)} ({self.diag.rows} frames)", file=sys.stderr)
+
+
+def _trajectory_outputs(settings: RunSettings, sim, start_frame):
+    """(GSDWriter or None, StepFrames or None) for --trajectory and --every; a resumed
+    run keeps the frames written up to its checkpoint."""
+    if settings.trajectory is None:
+        return None, None
+    from .trajectory import GSDWriter, StepFrames
+    writer = GSDWriter(settings.trajectory,
+                       keep_until_step=sim.stats["steps"] if start_frame else None)
+    if not settings.trajectory_every:
+        return writer, None
+    return writer, StepFrames(sim, writer, settings.trajectory_every)
 
 
 def cmd_run(scene: Scene, args):
@@ -463,7 +550,7 @@ def cmd_run(scene: Scene, args):
             return EXIT_INTERRUPTED
         progress.steps = work.steps
         progress.attach(sim)
-        outputs = RunOutputs(scene, settings, renderer, start_frame)
+        outputs = RunOutputs(scene, settings, renderer, start_frame, sim)
         status = _run_frames(sim, outputs, progress, settings, start_frame)
     _print_summary(sim, outputs.render_seconds)
     return status
@@ -500,6 +587,67 @@ def _print_summary(sim, render_seconds):
           f"{st['steps']} steps, {st['pair_collisions']} pair + {st['wall_collisions']} wall "
           f"collisions, max overlap {st['max_overlap']:.2e}, unresolved {st['unresolved']}; "
           f"rendering: {render_seconds:.2f} s", file=sys.stderr)
+
+
+def split_values(text: str) -> list:
+    """'0.5,0.7' -> [0.5, 0.7]; each value is read as TOML (numbers, true/false, arrays
+    such as [0, 0, -9.81], quoted strings), else taken as a bare string ('smid')."""
+    try:
+        import tomllib
+    except ImportError:  # Python 3.10
+        import tomli as tomllib
+    items, depth, start = [], 0, 0
+    for k, c in enumerate(text + ","):
+        depth += (c == "[") - (c == "]")
+        if c == "," and depth == 0:
+            items.append(text[start:k].strip())
+            start = k + 1
+    values = []
+    for item in items:
+        if not item:
+            raise ValueError(f"empty value in {text!r}")
+        try:
+            values.append(tomllib.loads(f"v = {item}")["v"])
+        except tomllib.TOMLDecodeError:
+            values.append(item)
+    return values
+
+
+def sweep_grid(settings: list) -> dict:
+    """{key: values} of the --set options (ValueError naming a malformed one)."""
+    grid = {}
+    for text in settings:
+        key, sep, values = text.partition("=")
+        if not sep or not key.strip():
+            raise ValueError(f"--set {text!r}: write KEY=VALUE1,VALUE2,...")
+        if key.strip() in grid:
+            raise ValueError(f"--set {key.strip()} given twice: list all values in one --set")
+        grid[key.strip()] = split_values(values)
+    return grid
+
+
+def cmd_sweep(scene: Scene, args):
+    """Run the grid of --set values on Dask (or --serial); the CSV is written as runs end."""
+    from .sweeps import sweep
+    run = scene.meta.get("run", {})
+    out = args.out or os.path.join("out", f"{scene.name}-sweep.csv")
+    try:
+        grid = sweep_grid(args.grid)
+        if args.out is None:
+            os.makedirs("out", exist_ok=True)
+        rows = sweep(scene, grid, args.duration or run.get("duration", DEFAULT_DURATION),
+                     client=args.scheduler, serial=args.serial, workers=args.workers,
+                     threads=args.threads, arch=args.arch, precision=args.precision,
+                     compile=args.compile, out=out, progress=not args.quiet)
+    except (ValueError, RuntimeError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f"\ninterrupted; the runs that finished are in {out}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    failed = sum(row["error"] is not None for row in rows)
+    print(f"wrote {out} ({len(rows)} runs, {failed} failed)", file=sys.stderr)
+    return EXIT_RUNS_FAILED if failed else 0
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
 Strict schema: unknown keys are rejected with the nearest valid name, wrong types
 are named, and every problem in the file is reported at once in one ValueError.
-Units are SI, z is up. See README "Scene files" for every key and its default.
+Units are SI, z is up. docs/scenes.md lists every key and its default.
 
     name = "seed_five"
     [box]      lo, hi (3 numbers, m), periodic (3 bools), wall_restitution
@@ -12,7 +12,10 @@ Units are SI, z is up. See README "Scene files" for every key and its default.
     [run]      duration (s), fps
     [render]   width, height (multiples of 16), camera_position, camera_lookat, fov,
                colours ("group" | "speed"), background
-    [output]   video (path, .mp4), snapshots (bool: .npz), checkpoint_every (frames)
+    [output]   video (path, .mp4), snapshots (bool: .npz), checkpoint_every (frames),
+               trajectory (path, .gsd), trajectory_every (steps)
+    [initial]  gsd (path of a GSD file, relative to the scene file), frame (index, -1:
+               the last): the spheres of that frame instead of sphere tables
     [[spheres]]  one sphere: x, v, radius, and mass or density
     [[lattice]]  a simple-cubic block: lo, hi, spacing, radius, mass|density,
                  v (velocity of all) or speed (random directions), seed
@@ -27,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import os
 import re
 try:
     import tomllib
@@ -40,7 +44,7 @@ from .scene import DEFAULT_DENSITY, RESTITUTION_MODELS, Scene
 __all__ = ["load_scene", "scene_from_dict", "SceneFileError"]
 
 _TOP = {"name": str, "box": dict, "physics": dict, "run": dict, "render": dict, "output": dict,
-        "spheres": list, "lattice": list, "random": list, "pour": list}
+        "initial": dict, "spheres": list, "lattice": list, "random": list, "pour": list}
 _RENDER = {"width": int, "height": int, "camera_position": "vec3", "camera_lookat": "vec3",
            "fov": float, "colours": str, "background": "vec3"}
 _BOX = {"lo": "vec3", "hi": "vec3", "periodic": "bool3", "wall_restitution": float}
@@ -48,7 +52,9 @@ _PHYSICS = {"gravity": "vec3", "restitution": float, "step_fraction": float,
             "max_sweeps": int, "precision": str, "restitution_model": str,
             "rest_speed": float}
 _RUN = {"duration": float, "fps": float}
-_OUTPUT = {"video": str, "snapshots": bool, "checkpoint_every": int}
+_OUTPUT = {"video": str, "snapshots": bool, "checkpoint_every": int, "trajectory": str,
+           "trajectory_every": int}
+_INITIAL = {"gsd": str, "frame": int}
 _SPHERE = {"colour": "vec3", "x": "vec3", "v": "vec3", "radius": float, "mass": float,
            "density": float}
 _LATTICE = {"colour": "vec3", "v_spread": float, "lo": "vec3", "hi": "vec3", "spacing": float, "radius": float,
@@ -97,11 +103,8 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
     run = _table(data, "run", _RUN, problems)
     render = _table(data, "render", _RENDER, problems)
     output = _table(data, "output", _OUTPUT, problems)
-    if "video" in output and isinstance(output["video"], str) and \
-            not output["video"].lower().endswith(".mp4"):
-        problems.append(f"output.video: must end in .mp4, got {output['video']!r}")
-    if isinstance(output.get("checkpoint_every"), int) and output["checkpoint_every"] < 1:
-        problems.append(f"output.checkpoint_every: must be >= 1 frame, got {output['checkpoint_every']}")
+    initial = _table(data, "initial", _INITIAL, problems)
+    _check_output(output, problems)
     _check_render(render, run, problems)
     groups = []
     for key, schema in (("spheres", _SPHERE), ("lattice", _LATTICE), ("random", _RANDOM),
@@ -122,8 +125,14 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
     if "precision" in physics and physics["precision"] not in ("f32", "f64"):
         problems.append(f"physics.precision: must be \"f32\" or \"f64\", got {physics['precision']!r}")
     _check_values(box, physics, problems)
-    if not groups and not problems:
-        problems.append("no spheres: add [[spheres]], [[lattice]], [[random]] or [[pour]] tables")
+    _check_initial(initial, groups, problems)
+    if not groups and "gsd" not in initial and not problems:
+        problems.append("no spheres: add [[spheres]], [[lattice]], [[random]] or [[pour]] "
+                        "tables, or [initial] gsd")
+    meta = {"run": run, "physics": physics, "render": render, "output": output,
+            "source": source}
+    if "gsd" in initial and not problems:
+        return _scene_from_initial(initial, box, physics, data, meta, source)
     arrays = {"x": [], "v": [], "radius": [], "mass": [], "group": []}
     if not problems:
         for kind, where, item in groups:
@@ -139,19 +148,66 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
             np.concatenate(arrays["x"]), np.concatenate(arrays["v"]),
             np.concatenate(arrays["radius"]), mass=np.concatenate(arrays["mass"]),
             box=(lo, hi), periodic=box.get("periodic", [False, False, False]),
-            gravity=physics.get("gravity", [0.0, 0.0, 0.0]),
-            restitution=physics.get("restitution", 1.0),
-            wall_restitution=box.get("wall_restitution", 1.0),
-            restitution_model=physics.get("restitution_model", "normal"),
-            rest_speed=physics.get("rest_speed"),
-            name=data.get("name", "scene"))
+            **_physics_args(box, physics, data))
     except ValueError as exc:
         raise SceneFileError(source, [str(exc) + _origins(str(exc), groups, arrays)]) from None
     colours = np.array([item.get("colour", [-1.0, -1.0, -1.0]) for _, _, item in groups],
                        dtype=np.float64)
-    meta = {"run": run, "physics": physics, "render": render, "output": output,
-            "source": source,
-            "groups": np.concatenate(arrays["group"]), "group_colours": colours}
+    meta.update(groups=np.concatenate(arrays["group"]), group_colours=colours,
+                group_names=[where for _, where, _ in groups])
+    return dataclasses.replace(scene, meta=meta)
+
+
+def _physics_args(box, physics, data) -> dict:
+    """The arguments of Scene.from_arrays that the [physics] and [box] tables give,
+    besides the box and its periodicity."""
+    return dict(gravity=physics.get("gravity", [0.0, 0.0, 0.0]),
+                restitution=physics.get("restitution", 1.0),
+                wall_restitution=box.get("wall_restitution", 1.0),
+                restitution_model=physics.get("restitution_model", "normal"),
+                rest_speed=physics.get("rest_speed"), name=data.get("name", "scene"))
+
+
+def _check_output(output, problems):
+    for key, ending in (("video", ".mp4"), ("trajectory", ".gsd")):
+        value = _valid(output, key, _OUTPUT)
+        if value is not None and not value.lower().endswith(ending):
+            problems.append(f"output.{key}: must end in {ending}, got {value!r}")
+    for key, unit in (("checkpoint_every", "frame"), ("trajectory_every", "step")):
+        value = _valid(output, key, _OUTPUT)
+        if value is not None and value < 1:
+            problems.append(f"output.{key}: must be >= 1 {unit}, got {value}")
+
+
+def _check_initial(initial, groups, problems):
+    """[initial]: gsd (a path) and frame (an index) go together; sphere tables do not."""
+    if "frame" in initial and "gsd" not in initial:
+        problems.append("initial.frame: needs initial.gsd (the file to read the frame from)")
+    if "gsd" in initial and groups:
+        tables = sorted({kind for kind, _, _ in groups})
+        problems.append("initial.gsd: the spheres come from the GSD frame; remove the "
+                        + ", ".join(f"[[{t}]]" for t in tables) + " tables, or [initial]")
+
+
+def _scene_from_initial(initial, box, physics, data, meta, source) -> Scene:
+    """The scene of a file whose spheres are a frame of [initial] gsd: box and periodic
+    from [box] when given, else from the frame (trajectory.scene_from_gsd)."""
+    from .trajectory import scene_from_gsd
+    path = initial["gsd"]
+    folder = os.path.dirname(source) if os.path.isfile(source) else ""
+    if folder and not os.path.isabs(path):
+        path = os.path.join(folder, path)
+    frame = initial.get("frame", -1)
+    given = "lo" in box or "hi" in box
+    lo, hi = box.get("lo", [0.0, 0.0, 0.0]), box.get("hi", [1.0, 1.0, 1.0])
+    try:
+        scene = scene_from_gsd(path, frame, box=(lo, hi) if given else None,
+                               periodic=box.get("periodic"), **_physics_args(box, physics, data))
+    except ValueError as exc:
+        key = "initial.frame" if "frame" in str(exc) and "does not exist" in str(exc) \
+            else "initial.gsd"
+        raise SceneFileError(source, [f"{key}: {exc}"]) from None
+    meta.update(scene.meta)
     return dataclasses.replace(scene, meta=meta)
 
 

@@ -11,6 +11,8 @@ import pytest
 
 from taichi_spheres.output import CSV_COLUMNS
 
+from ctrl_c import interrupt_after_lines
+
 TINY = """
 name = "tiny"
 [physics]
@@ -137,18 +139,9 @@ def test_fused_run_writes_the_same_diagnostics(tiny_run):
 def test_interrupt_keeps_a_playable_video(tmp_path, vulkan):
     import imageio.v2 as imageio
     (tmp_path / "tiny.toml").write_text(TINY.replace("duration = 0.5", "duration = 600.0"))
-    proc = subprocess.Popen([sys.executable, "-m", "taichi_spheres.cli", "run", "tiny.toml",
-                             "-o", "long.mp4", "--quiet"], cwd=tmp_path,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    csv_path = tmp_path / "long.csv"
-    deadline = time.time() + 300
-    while time.time() < deadline:
-        if csv_path.exists() and len(csv_path.read_text().splitlines()) > 5:
-            break
-        time.sleep(0.2)
-    proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
+    code, err = interrupt_after_lines(["run", "tiny.toml", "-o", "long.mp4", "--quiet"],
+                                      tmp_path, tmp_path / "long.csv", 5)
+    assert code == 130, err
     assert "interrupted at frame" in err
     n = imageio.get_reader(str(tmp_path / "long.mp4")).count_frames()
     assert n >= 4
@@ -342,3 +335,77 @@ def test_forced_slow_run_reports_on_sigusr1(tmp_path):
             proc.send_signal(signal.SIGINT)
             proc.wait(timeout=120)
     assert proc.returncode == 130, err.read_text()
+
+
+# ---- GSD trajectories from the command line ----
+
+def gsd_frames(path):
+    import gsd.hoomd
+    with gsd.hoomd.open(str(path)) as traj:
+        return [(int(f.configuration.step), float(f.log["taichi_spheres/time"][0]),
+                 f.particles.position.copy()) for f in traj]
+
+
+@pytest.fixture(scope="module")
+def gsd_run(tmp_path_factory):
+    """A run without video writing a trajectory, one frame per video frame."""
+    pytest.importorskip("gsd.hoomd")
+    d = tmp_path_factory.mktemp("gsd")
+    (d / "tiny.toml").write_text(TINY)
+    r = cli("run", "tiny.toml", "-o", "full.mp4", "--no-video", "--quiet", "--trajectory",
+            "full.gsd", cwd=d)
+    assert r.returncode == 0, r.stderr
+    assert "full.gsd" in r.stderr
+    return d
+
+
+def test_trajectory_has_one_frame_per_video_frame(gsd_run):
+    frames = gsd_frames(gsd_run / "full.gsd")
+    rows = read_csv(gsd_run / "full.csv")
+    assert [t for _, t, _ in frames] == [float(row["time"]) for row in rows]
+    assert [s for s, _, _ in frames] == [int(row["steps"]) for row in rows]
+    assert all(x.shape == (32, 3) for _, _, x in frames)
+
+
+def test_trajectory_every_n_steps(gsd_run):
+    r = cli("run", "tiny.toml", "-o", "every.mp4", "--no-video", "--quiet", "--trajectory",
+            "every.gsd", "--every", "25", cwd=gsd_run)
+    assert r.returncode == 0, r.stderr
+    steps = [s for s, _, _ in gsd_frames(gsd_run / "every.gsd")]
+    last = int(read_csv(gsd_run / "full.csv")[-1]["steps"])
+    assert steps == list(range(0, last + 1, 25))
+    assert read_csv(gsd_run / "every.csv") == read_csv(gsd_run / "full.csv")
+
+
+def test_resumed_run_continues_the_trajectory(gsd_run):
+    r = cli("run", "tiny.toml", "-o", "part.mp4", "--no-video", "--quiet", "--duration", "0.3",
+            "--checkpoint-every", "4", "--trajectory", "part.gsd", cwd=gsd_run)
+    assert r.returncode == 0, r.stderr
+    r = cli("run", "tiny.toml", "-o", "part.mp4", "--no-video", "--quiet", "--resume",
+            "part.ckpt.npz", "--trajectory", "part.gsd", cwd=gsd_run)
+    assert r.returncode == 0, r.stderr
+    full, part = gsd_frames(gsd_run / "full.gsd"), gsd_frames(gsd_run / "part.gsd")
+    assert [f[:2] for f in part] == [f[:2] for f in full]
+    np.testing.assert_array_equal(part[-1][2], full[-1][2])
+
+
+def test_every_without_a_trajectory_exits_2(tmp_path):
+    (tmp_path / "tiny.toml").write_text(TINY)
+    r = cli("run", "tiny.toml", "--no-video", "--every", "10", "-o", "e.mp4", cwd=tmp_path,
+            timeout=120)
+    assert r.returncode == 2 and "--every" in r.stderr and "--trajectory" in r.stderr
+
+
+def test_interrupt_keeps_a_valid_trajectory(tmp_path):
+    """Ctrl-C (a real SIGINT) leaves a GSD file with every frame the CSV has."""
+    pytest.importorskip("gsd.hoomd")
+    (tmp_path / "tiny.toml").write_text(TINY.replace("duration = 0.5", "duration = 600.0"))
+    csv_path = tmp_path / "long.csv"
+    code, err = interrupt_after_lines(["run", "tiny.toml", "-o", "long.mp4", "--no-video",
+                                       "--quiet", "--trajectory", "long.gsd"],
+                                      tmp_path, csv_path, 5)
+    assert code == 130, err
+    rows = read_csv(csv_path)
+    frames = gsd_frames(tmp_path / "long.gsd")
+    assert len(frames) == len(rows) >= 5
+    assert [t for _, t, _ in frames] == [float(row["time"]) for row in rows]

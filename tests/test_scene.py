@@ -534,8 +534,8 @@ def test_good_scene_file(tmp_path):
 
 def test_unknown_top_level_key(tmp_path):
     problems, msg = load_problems(tmp_path, 'bogus = 1\n' + GOOD)
-    assert problems == ["unknown key 'bogus' (valid: box, lattice, name, output, physics, "
-                        "pour, random, render, run, spheres)"]
+    assert problems == ["unknown key 'bogus' (valid: box, initial, lattice, name, output, "
+                        "physics, pour, random, render, run, spheres)"]
 
 
 def test_misspelt_top_level_key_gets_suggestion(tmp_path):
@@ -671,7 +671,8 @@ def test_value_ranges_reported_together(tmp_path):
 
 def test_no_spheres(tmp_path):
     problems, _ = load_problems(tmp_path, "[box]\nhi = [1.0, 1.0, 1.0]\n")
-    assert problems == ["no spheres: add [[spheres]], [[lattice]], [[random]] or [[pour]] tables"]
+    assert problems == ["no spheres: add [[spheres]], [[lattice]], [[random]] or [[pour]] "
+                        "tables, or [initial] gsd"]
 
 
 def test_overlapping_explicit_spheres_name_both_indices(tmp_path):
@@ -930,3 +931,94 @@ def test_speed_overflowing_f64_names_the_sphere():
 def test_gravity_overflowing_f64_is_named():
     with pytest.raises(ValueError, match=r"^gravity \[0, 0, -1e\+307\] m/s\^2 overflows f64"):
         make(n=2, gravity=(0.0, 0.0, -1e307))
+
+
+# ---- [initial] gsd: the spheres of a frame of a GSD trajectory ----
+
+def gsd_file(path, frames=2):
+    """A HOOMD-schema file of ``frames`` frames of two spheres (the last one moved)."""
+    gsd_hoomd = pytest.importorskip("gsd.hoomd")
+    with gsd_hoomd.open(str(path), "w") as traj:
+        for k in range(frames):
+            frame = gsd_hoomd.Frame()
+            frame.configuration.box = [2.0, 2.0, 2.0, 0, 0, 0]
+            frame.configuration.step = k
+            frame.particles.N = 2
+            frame.particles.position = [[-0.5 + 0.25 * k, 0, 0], [0.5, 0, 0]]
+            frame.particles.velocity = [[1.0, 0, 0], [0, 0, float(k)]]
+            frame.particles.diameter = [0.5, 0.25]
+            frame.particles.mass = [2.0, 1.0]
+            traj.append(frame)
+    return path
+
+
+INITIAL = """
+name = "continued"
+[physics]
+restitution = 0.7
+[initial]
+gsd = "start.gsd"
+"""
+
+
+def test_initial_gsd_takes_the_last_frame_relative_to_the_scene_file(tmp_path):
+    gsd_file(tmp_path / "start.gsd")
+    s = ts.load_scene(write(tmp_path, INITIAL))
+    assert s.n == 2 and s.restitution == 0.7 and s.name == "continued"
+    np.testing.assert_array_equal(s.x[0], [-0.25, 0, 0])           # HOOMD box, centred
+    np.testing.assert_array_equal(s.v[1], [0, 0, 1.0])
+    np.testing.assert_array_equal(s.radius, [0.25, 0.125])
+    np.testing.assert_array_equal(s.mass, [2.0, 1.0])
+    np.testing.assert_array_equal(s.box_lo, [-1, -1, -1])
+    assert s.periodic == (True, True, True)
+    assert s.meta["initial"]["frame"] == 1 and s.meta["group_names"] == ["A"]
+
+
+def test_initial_frame_and_box_from_the_scene_file(tmp_path):
+    gsd_file(tmp_path / "start.gsd")
+    text = INITIAL + "frame = 0\n[box]\nlo = [0.0, 0.0, 0.0]\nhi = [2.0, 2.0, 2.0]\n" \
+        "periodic = false\n"
+    s = ts.load_scene(write(tmp_path, text))
+    np.testing.assert_array_equal(s.x[0], [0.5, 1, 1])       # about the box centre
+    np.testing.assert_array_equal(s.v[1], [0, 0, 0])
+    assert s.periodic == (False, False, False)
+
+
+@pytest.mark.parametrize("extra, words", [
+    ("frame = 5\n", ["initial.frame:", "has 2 frame(s)", "frame 5 does not exist"]),
+    ("frame = -3\n", ["initial.frame:", "frame -3 does not exist"]),
+    ("frame = 1.5\n", ["initial.frame: must be an integer"]),
+    ("[[spheres]]\nx = [0.5, 0.5, 0.5]\nradius = 0.1\n",
+     ["initial.gsd: the spheres come from the GSD frame; remove the [[spheres]]"]),
+])
+def test_initial_mistakes_name_the_key(tmp_path, extra, words):
+    gsd_file(tmp_path / "start.gsd")
+    problems, msg = load_problems(tmp_path, INITIAL + extra)
+    assert len(problems) == 1 and all(w in msg for w in words), msg
+
+
+def test_initial_gsd_file_missing_or_unreadable(tmp_path):
+    problems, _ = load_problems(tmp_path, INITIAL)
+    assert problems == [f"initial.gsd: GSD file not found: {tmp_path / 'start.gsd'}"]
+    (tmp_path / "start.gsd").write_text("not gsd")
+    problems, _ = load_problems(tmp_path, INITIAL)
+    assert problems[0].startswith("initial.gsd: cannot read GSD file")
+
+
+def test_initial_frame_needs_a_file_and_gsd_must_be_a_path(tmp_path):
+    problems, _ = load_problems(tmp_path, GOOD + "[initial]\nframe = 0\n")
+    assert problems == ["initial.frame: needs initial.gsd (the file to read the frame from)"]
+    problems, _ = load_problems(tmp_path, "[initial]\ngsd = 3\n")
+    assert problems == ["initial.gsd: must be a str, got 3"]
+
+
+def test_output_trajectory_keys_are_checked(tmp_path):
+    text = GOOD + '[output]\ntrajectory = "t.xyz"\ntrajectory_every = 0\n'
+    problems, _ = load_problems(tmp_path, text)
+    assert problems == ["output.trajectory: must end in .gsd, got 't.xyz'",
+                        "output.trajectory_every: must be >= 1 step, got 0"]
+
+
+def test_tables_name_the_types_of_their_spheres(tmp_path):
+    s = ts.load_scene(write(tmp_path, GOOD))
+    assert s.meta["group_names"] == ["spheres[0]", "spheres[1]"]
