@@ -4,7 +4,7 @@ Cells are at least the largest diameter plus a margin ``2 * slack`` wide, so eve
 pair closer than contact lies in the same or adjacent cells even after the spheres
 have moved by up to ``slack`` since the grid was built.
 
-Ownership and colours (DESIGN.md, "Parallel step"): a pair of spheres in cells
+Ownership and colours (docs/design.md, "One step, in parallel"): a pair of spheres in cells
 ``a`` and ``b`` is *owned* by the cell ``c = lower(a, b)`` (component-wise lower,
 periodic-aware), so cell ``c`` only ever touches the 2x2x2 block ``c + {0,1}^3``.
 Cells whose coordinates have equal parity on every axis (8 colours) have disjoint

@@ -1,7 +1,7 @@
 """Exact event-driven reference simulator (numpy, float64, small N): the yardstick.
 
 Same physics and same :class:`~taichi_spheres.scene.Scene` input as the engine
-(DESIGN.md "Physics"), but integrated event by event instead of in steps:
+(docs/design.md, "Physics"), but integrated event by event instead of in steps:
 
 * Free flight: ``x(t+h) = x + v h + g h^2/2``, ``v += g h``.
 * Pair events: gravity is the same for all spheres, so the relative motion of a

@@ -1,6 +1,6 @@
 """Simulation: the public engine object (scene -> state -> step loop).
 
-One step of length h (DESIGN.md "Parallel step"):
+One step of length h (docs/design.md, "One step, in parallel"):
   1. drift every sphere on its exact ballistic path and apply walls (walls.py);
   2. build the uniform grid with a deterministic counting sort (grid.py);
   3. detect overlapping approaching pairs in parallel (contacts.py);

@@ -1,6 +1,6 @@
 """Free flight and walls (step stage 1): exact ballistic drift, exact wall rewind.
 
-Free flight (DESIGN.md "Physics"): ``x += v h + g h^2/2``, ``v += g h``.
+Free flight (docs/design.md, "Physics"): ``x += v h + g h^2/2``, ``v += g h``.
 
 Walls: each axis moves independently, so a sphere that ends a step past a wall on
 axis ``a`` is rewound along its own ballistic path to the contact time: with
@@ -89,15 +89,11 @@ class Motion:
 
     @ti.func
     def walls_and_wrap(self, i):
-        """Bring sphere i back inside the box: wrap periodic axes, bounce off walls."""
-        x = self.state.x[i]
+        """Bring sphere i back inside the box: wrap periodic axes, bounce off walls (see
+        the module docstring); mark it supported when it touched a floor-like wall
+        slowly (supports)."""
+        x = self.wrap_periodic(self.state.x[i])
         v = self.state.v[i]
-        for a in ti.static(range(3)):
-            if ti.static(not self.f.wall_axes[a]):
-                if x[a] < self.params.lo[None][a]:
-                    x[a] += self.params.size[None][a]
-                elif x[a] >= self.params.hi[None][a]:
-                    x[a] -= self.params.size[None][a]
         if ti.static(self.f.walls):
             r = self.state.rad(i)
             h = self.params.h[None]
@@ -108,91 +104,8 @@ class Motion:
                 e_w = self.params.e_wall[None]
             for a in ti.static(range(3)):
                 if ti.static(self.f.wall_axes[a]):
-                    g_a = ti.cast(0, self.real)
-                    if ti.static(self.f.gravity_axes[a]):
-                        g_a = self.params.gravity[None][a]
-                    lo_c = self.params.lo[None][a] + r
-                    hi_c = self.params.hi[None][a] - r
-                    for bounce in range(ti.static(self.max_bounces + 1)):
-                        side = 0
-                        d = ti.cast(0, self.real)
-                        if x[a] < lo_c:
-                            side = -1
-                            d = x[a] - lo_c
-                        elif x[a] > hi_c:
-                            side = 1
-                            d = hi_c - x[a]
-                        if side == 0:
-                            break
-                        # floor-like: gravity presses the sphere into this wall
-                        floor = False
-                        if ti.static(self.f.gravity_axes[a]):
-                            if side * g_a > 0:
-                                floor = True
-                                on_floor = True
-                        w = v[a] * side * -1
-                        acc = g_a * side * -1
-                        s = self._contact_time(d, w, acc, self.f.gravity_axes[a])
-                        bounced = False
-                        if s >= 0 and s <= 2 * h and bounce < ti.static(self.max_bounces):
-                            wc = w - acc * s
-                            wn = self.rebound(i, -wc, e_w, floor)
-                            dn = wn * s + ti.cast(0.5, self.real) * acc * s * s
-                            if side < 0:
-                                x[a] = lo_c + dn
-                            else:
-                                x[a] = hi_c - dn
-                            v[a] = (wn + acc * s) * side * -1
-                            moved += (wn - wc) * s
-                            ti.atomic_add(self.params.count[WALLS], 1)
-                            self.count_hit(i)
-                            bounced = True
-                        if not bounced and bounce < ti.static(self.max_bounces):
-                            # past the wall without a crossing on its current path: a
-                            # pair collision carried it there, or it rests on the wall
-                            mirror = True
-                            if ti.static(self.f.gravity_axes[a]):
-                                mirror = acc == 0
-                            if mirror:
-                                # mirror into the box and reflect (energy exact for e=1)
-                                wn = w
-                                if w < 0:
-                                    wn = self.rebound(i, -w, e_w, floor)
-                                if side < 0:
-                                    x[a] = lo_c - d
-                                else:
-                                    x[a] = hi_c + d
-                                v[a] = wn * side * -1
-                                moved += -2 * d
-                                ti.atomic_add(self.params.count[WALLS], 1)
-                                self.count_hit(i)
-                            else:
-                                # put it on the wall and pay the potential energy of the
-                                # lift -acc*d out of its normal kinetic energy, so energy
-                                # never grows (a sphere resting under gravity stays at rest)
-                                w2 = ti.max(w * w - 2 * acc * d, 0)
-                                wn = ti.sqrt(w2)
-                                if w < 0:
-                                    wn = self.rebound(i, wn, e_w, floor)
-                                if side < 0:
-                                    x[a] = lo_c
-                                else:
-                                    x[a] = hi_c
-                                v[a] = wn * side * -1
-                                moved += -d
-                                ti.atomic_add(self.params.count[WALL_RESTS], 1)
-                            bounced = True
-                        if not bounced:
-                            # still past the wall after max_bounces bounces: rest on it
-                            if side < 0:
-                                x[a] = lo_c
-                                v[a] = ti.max(v[a], 0)
-                            else:
-                                x[a] = hi_c
-                                v[a] = ti.min(v[a], 0)
-                            moved += -d
-                            ti.atomic_add(self.params.count[WALL_RESTS], 1)
-                            break
+                    x, v, moved, on_floor = self.walls_on_axis(i, a, x, v, moved, on_floor,
+                                                               r, h, e_w)
             self.state.moved[i] += moved
             if ti.static(self.f.supports):
                 if on_floor and v.dot(self.params.up[None]) <= self.params.rest_speed[None]:
@@ -201,6 +114,124 @@ class Motion:
                     self.state.support[i] = 1
         self.state.x[i] = x
         self.state.v[i] = v
+
+    @ti.func
+    def wrap_periodic(self, x):
+        """Position x [m] wrapped into the box on periodic axes (one shift: positions
+        never move more than a box length in a step)."""
+        for a in ti.static(range(3)):
+            if ti.static(not self.f.wall_axes[a]):
+                if x[a] < self.params.lo[None][a]:
+                    x[a] += self.params.size[None][a]
+                elif x[a] >= self.params.hi[None][a]:
+                    x[a] -= self.params.size[None][a]
+        return x
+
+    @ti.func
+    def walls_on_axis(self, i, a: ti.template(), x, v, moved, on_floor, r, h, e_w):
+        """The walls of axis a for sphere i of radius r [m] at x, v: bounce while it is
+        past one (up to max_bounces times, then rest on it); returns x, v, the bound
+        ``moved`` [m] grown by the moves, and on_floor (it touched a floor-like wall)."""
+        g_a = ti.cast(0, self.real)
+        if ti.static(self.f.gravity_axes[a]):
+            g_a = self.params.gravity[None][a]
+        lo_c = self.params.lo[None][a] + r
+        hi_c = self.params.hi[None][a] - r
+        for bounce in range(ti.static(self.max_bounces + 1)):
+            side = 0
+            d = ti.cast(0, self.real)
+            if x[a] < lo_c:
+                side = -1
+                d = x[a] - lo_c
+            elif x[a] > hi_c:
+                side = 1
+                d = hi_c - x[a]
+            if side == 0:
+                break
+            # floor-like: gravity presses the sphere into this wall
+            floor = False
+            if ti.static(self.f.gravity_axes[a]):
+                if side * g_a > 0:
+                    floor = True
+                    on_floor = True
+            w = v[a] * side * -1
+            acc = g_a * side * -1
+            s = self._contact_time(d, w, acc, self.f.gravity_axes[a])
+            last = bounce == ti.static(self.max_bounces)
+            xa = lo_c
+            if side > 0:
+                xa = hi_c
+            va = v[a]
+            if not last and s >= 0 and s <= 2 * h:
+                xa, va, moved = self.bounce(i, d, w, acc, s, side, lo_c, hi_c, e_w, floor,
+                                            moved)
+            elif not last:
+                xa, va, moved = self.put_back(i, d, w, acc, side, lo_c, hi_c, e_w, floor,
+                                              moved, a)
+            else:
+                # still past the wall after max_bounces bounces: rest on it
+                if side < 0:
+                    va = ti.max(v[a], 0)
+                else:
+                    va = ti.min(v[a], 0)
+                moved += -d
+                ti.atomic_add(self.params.count[WALL_RESTS], 1)
+            x[a] = xa
+            v[a] = va
+            if last:
+                break
+        return x, v, moved, on_floor
+
+    @ti.func
+    def bounce(self, i, d, w, acc, s, side, lo_c, hi_c, e_w, floor, moved):
+        """A crossing s [s] ago on the current path (d < 0 past the contact plane, w and
+        acc inward speed and acceleration): rebound at contact and carry forward;
+        returns the new coordinate [m], velocity component [m/s] and moved [m]."""
+        wc = w - acc * s
+        wn = self.rebound(i, -wc, e_w, floor)
+        dn = wn * s + ti.cast(0.5, self.real) * acc * s * s
+        xa = lo_c + dn
+        if side > 0:
+            xa = hi_c - dn
+        va = (wn + acc * s) * side * -1
+        moved += (wn - wc) * s
+        ti.atomic_add(self.params.count[WALLS], 1)
+        self.count_hit(i)
+        return xa, va, moved
+
+    @ti.func
+    def put_back(self, i, d, w, acc, side, lo_c, hi_c, e_w, floor, moved, a: ti.template()):
+        """Past the wall without a crossing on its current path (a pair collision
+        carried it there, or it rests on the wall): without gravity on the axis mirror
+        it into the box and reflect (energy exact for e = 1); with gravity put it on the
+        wall and pay the potential energy of the lift -acc d out of its normal kinetic
+        energy, so energy never grows (a sphere resting under gravity stays at rest).
+        Returns the new coordinate [m], velocity component [m/s] and moved [m]."""
+        mirror = True
+        if ti.static(self.f.gravity_axes[a]):
+            mirror = acc == 0
+        xa = lo_c
+        if side > 0:
+            xa = hi_c
+        wn = w
+        if mirror:
+            if w < 0:
+                wn = self.rebound(i, -w, e_w, floor)
+            xa = lo_c - d
+            if side > 0:
+                xa = hi_c + d
+            moved += -2 * d
+            ti.atomic_add(self.params.count[WALLS], 1)
+            self.count_hit(i)
+        else:
+            w2 = ti.max(w * w - 2 * acc * d, 0)
+            wn = ti.sqrt(w2)
+            if w < 0:
+                wn = self.rebound(i, wn, e_w, floor)
+            moved += -d
+            ti.atomic_add(self.params.count[WALL_RESTS], 1)
+        va = wn * side * -1
+        return xa, va, moved
 
     @ti.func
     def rebound(self, i, speed, e_w, floor):

@@ -1,4 +1,4 @@
-"""Two-body physics against closed forms (DESIGN.md "Physics").
+"""Two-body physics against closed forms (docs/design.md, "Physics").
 
 What is checked, and against what:
 
@@ -83,7 +83,7 @@ def contact_time(d0, u, sigma):
 
 
 def impulse_form(v1, v2, m1, m2, n, e=1.0):
-    """DESIGN.md: u = v1 - v2, J = (1+e) m1 m2/(m1+m2) (u.n), v1 -= J n/m1, v2 += J n/m2.
+    """docs/design.md: u = v1 - v2, J = (1+e) m1 m2/(m1+m2) (u.n), v1 -= J n/m1, v2 += J n/m2.
     Works on (3,) or (K, 3) arrays (n unit vectors)."""
     un = np.sum((v1 - v2) * n, axis=-1, keepdims=True)
     j = (1.0 + e) * (m1 * m2 / (m1 + m2)) * un
