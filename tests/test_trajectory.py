@@ -174,3 +174,46 @@ def test_bad_frames_are_named(tmp_path, case, words):
     with pytest.raises(ValueError) as err:
         trajectory.read_frame(path, 3 if case == "frame" else -1)
     assert all(w in str(err.value) for w in words), str(err.value)
+
+
+def test_freud_reads_the_contact_value_of_carnahan_starling(tmp_path):
+    """freud's radial distribution function of an equilibrated elastic gas at phi = 0.3,
+    from our GSD file: its contact value matches Carnahan-Starling,
+    g(sigma+) = (1 - phi/2) / (1 - phi)^3, within 4 standard errors over frames."""
+    freud = pytest.importorskip("freud")
+    phi, sigma = 0.3, 1.0
+    sim = ts.Simulation(builders.gas(2000, packing=phi, radius=sigma / 2))
+    sim.advance(1.0)                                # ~5 collisions per sphere
+    with ts.GSDWriter(tmp_path / "gas.gsd") as writer:
+        for _ in range(20):                         # ~1 collision per sphere apart
+            sim.advance(0.1)
+            writer.append(sim)
+    contact = []
+    with gsd_hoomd.open(str(tmp_path / "gas.gsd")) as traj:
+        for frame in traj:
+            rdf = freud.density.RDF(bins=30, r_max=1.3 * sigma, r_min=sigma)
+            rdf.compute(system=frame)
+            fit = np.polyfit(rdf.bin_centers - sigma, rdf.rdf, 2)   # extrapolated to sigma+
+            contact.append(fit[-1])
+    mean, error = np.mean(contact), np.std(contact, ddof=1) / np.sqrt(len(contact))
+    theory = (1 - phi / 2) / (1 - phi) ** 3
+    assert abs(mean - theory) < 4 * error, (mean, error, theory)
+    assert error < 0.02 * theory
+
+
+def test_ovito_sees_the_positions_and_radii(tmp_path):
+    """OVITO (PyPI ovito, the [ovito] extra) imports our file: the frames, the centred
+    positions, the radii and the box."""
+    ovito_io = pytest.importorskip("ovito.io")
+    sim = ts.Simulation(walled_scene())
+    with ts.GSDWriter(tmp_path / "run.gsd") as writer:
+        writer.append(sim)
+        sim.advance(0.1)
+        writer.append(sim)
+    pipeline = ovito_io.import_file(str(tmp_path / "run.gsd"))
+    assert pipeline.source.num_frames == 2
+    data = pipeline.compute(1)
+    st = sim.state()
+    np.testing.assert_allclose(np.asarray(data.particles.positions), st.x - 2.5, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(data.particles["Radius"]), st.radius)
+    np.testing.assert_allclose(np.asarray(data.cell[...])[:, 3], [-0.5, -0.5, -0.5])
