@@ -149,6 +149,5 @@ def acquire(key: EngineKey, n: int, n_cells: int) -> Engine:
 
 def field_parts(engine: Engine) -> tuple:
     """The objects whose attributes hold an engine's Taichi fields."""
-    p = engine.params
-    return (engine.state, p, p.count, p.vals, engine.motion, engine.grid, engine.contacts,
+    return (engine.state, engine.params, engine.motion, engine.grid, engine.contacts,
             engine.projection)

@@ -8,8 +8,6 @@ import taichi as ti
 
 from .contacts import Contacts
 from .grid import Grid
-from .params import (OPEN_OVERLAP, PROJ_WORST, PROJECTED, PROJECTED_PAIRS, REMAINING,
-                     SEP_OVERLAP)
 from .projection import Projection
 from .walls import Motion
 
@@ -28,7 +26,7 @@ class FusedStep:
     1 if the overlap projection is due (overlap above ``tolerance`` after a step that
     hit the sweep limit, or in a scene with resting contact: ``supports``), as
     :meth:`Simulation.step` decides it. ``project()``: the projection's iterations;
-    sets count[PROJECTED] = 1, count[PROJECTED_PAIRS] and vals[PROJ_WORST]. The same
+    sets params.projected = 1, params.projected_pairs and params.proj_worst. The same
     functions in the same order as the step launched kernel by kernel, so the same
     bits. Each function body appears once per kernel, and drift, grid build and
     detection stay top-level loops (separate tasks): Taichi compiles a loop nested in
@@ -48,31 +46,31 @@ class FusedStep:
             contacts._detect_all_body()
             sweeps = contacts.serial_sweeps(max_sweeps)
             far = contacts.status() % 2
-            overlap = params.vals[SEP_OVERLAP]
-            if params.count[REMAINING] > 0:
-                overlap = ti.max(overlap, params.vals[OPEN_OVERLAP])
+            overlap = params.sep_overlap[None]
+            if params.remaining[None] > 0:
+                overlap = ti.max(overlap, params.open_overlap[None])
             due = 0
             # compared in f64, as the Python step compares its float copies (same bits)
             if ti.cast(overlap, ti.f64) > tol and \
-                    (params.count[REMAINING] > 0 or ti.static(supports)):
+                    (params.remaining[None] > 0 or ti.static(supports)):
                 due = 1
             return 4 * sweeps + 2 * far + due
 
         @ti.kernel
         def project(tol: ti.f64):
-            params.count[PROJECTED] = 1
+            params.projected[None] = 1
             grid._build_body()
             projection._project_all_body()
             it = 1
             while ti.cast(projection.worst[None], ti.f64) > tol:
-                params.count[PROJECTED_PAIRS] += projection.pushed[None]
+                params.projected_pairs[None] += projection.pushed[None]
                 if it == ti.static(projection.max_iterations):
                     break
                 grid._build_body()
                 projection._project_near_body()
                 it += 1
             projection._finish_body()
-            params.vals[PROJ_WORST] = projection.worst[None]
+            params.proj_worst[None] = projection.worst[None]
 
         # the tolerance goes in as an f64 argument: compared exactly as the Python step
         # compares its float copies, in f32 builds too

@@ -1,59 +1,42 @@
-"""Scalar parameters and counters shared by the step kernels (0-d / tiny fields).
+"""Scalar parameters and counters shared by the step kernels (0-d fields).
 
 Keeping scalars in fields (not baked-in constants, not kernel arguments) lets one
 compiled kernel serve every step length and works on backends without f64
-arguments (Metal).
+arguments (Metal). Each counter is a 0-d field of its own, named after what it
+counts (COUNTS, VALUES): Taichi reduces atomics on a 0-d field thread-locally (one
+atomic per thread and loop), while atomics on elements of one small 1-d field contend
+between threads (about 5x slower on 2 cores: ``python tools/launch_overhead.py``).
 """
+
+import types
 
 import numpy as np
 import taichi as ti
-from taichi.lang import impl
 
-# indices into StepParams.count (i32, per step)
-(REMAINING, PAIRS, WALLS, WALL_RESTS, MULTI, RESTED, SUPPORTED, FLOOR, PROJECTED,
- PROJECTED_PAIRS, WALL_RESTED) = range(11)
-N_COUNTS = 11
-# indices into StepParams.vals (real, per step)
-SEP_OVERLAP, OPEN_OVERLAP, VMAX2, MOVED, E_PAIRS, E_WALLS, E_REST, VIRIAL, PROJ_WORST = range(9)
-N_VALS = 9
-
-
-class Slots:
-    """``n`` scalar (0-d) fields of one dtype, addressed as ``slots[k]`` (k a Python int):
-    read and written in kernels, read in Python. Separate 0-d fields rather than one (n,) field: Taichi
-    reduces atomics on a 0-d field thread-locally (one atomic per thread and loop),
-    while atomics on elements of one small 1-d field contend between threads (about
-    5x slower on this project's 2-core VM: ``python tools/launch_overhead.py``)."""
-
-    def __init__(self, dtype, n):
-        self.fields = [ti.field(dtype, shape=()) for _ in range(n)]
-
-    def __getitem__(self, k):
-        if impl.inside_kernel():
-            return impl.subscript(None, self.fields[k], None)
-        return self.fields[k][None]
+#: i32 counters of one step: approaching overlaps left by the last detection; pair and
+#: wall collisions; wall rest clamps (spheres put on a wall); spheres with more than
+#: one collision; pair collisions made perfectly inelastic by the rest or collapse
+#: rule, of which against a supported sphere; spheres supported by the floor; of a
+#: fused step (fused.py) also: 1 if it ran the overlap projection, and the pairs the
+#: projection pushed; wall impacts made perfectly inelastic by the rest rule.
+COUNTS = ("remaining", "pair_collisions", "wall_collisions", "wall_rests",
+          "multi_collision_spheres", "rest_collisions", "supported_collisions", "on_floor",
+          "projected", "projected_pairs", "wall_rest_collisions")
+#: real values of one step: max relative overlap of separating pairs, of approaching
+#: pairs in the last detection; max |v|^2 [m^2/s^2]; max distance moved since the grid
+#: was built [m]; kinetic energy removed by pair restitution, wall restitution and the
+#: rest rule [J]; collisional virial sum r_ij . dp_i [J s]; of a fused step that
+#: projected: the largest relative overlap its last projection iteration measured.
+VALUES = ("sep_overlap", "open_overlap", "vmax2", "moved", "energy_pair_restitution",
+          "energy_wall_restitution", "energy_rest_rule", "virial", "proj_worst")
 
 
 @ti.data_oriented
 class StepParams:
-    """h [s]; gravity [m/s^2]; box lo/hi/size [m]; restitution e, e_wall; counters.
-
-    rest_speed [m/s]: pair approach speed below which e = 0 (0: rule off).
-    up: unit vector against gravity (zero without gravity).
-    count: N_COUNTS i32 slots (:class:`Slots`) — remaining approaching overlaps, pair and wall
-        collisions, wall rest clamps, spheres with more than one collision, pair
-        collisions made perfectly inelastic by the rest rule, of which against a
-        supported sphere, spheres supported by the floor, in the current step; of a
-        fused step (fused.py) also: 1 if it ran the overlap projection, and the pairs
-        the projection pushed; wall impacts made perfectly inelastic by the rest
-        rule (floor-like walls only).
-    vals: N_VALS real slots — max relative overlap of separating pairs, of
-        approaching pairs in the last detection, max |v|^2, max distance moved;
-        kinetic energy removed by pair restitution, by wall restitution, by the
-        rest rule [J]; collisional virial sum r_ij . dp_i [J s] (all in this step);
-        of a fused step that projected: the largest relative overlap its last
-        projection iteration measured.
-    """
+    """h [s]; gravity [m/s^2]; box lo/hi/size [m]; restitution e, e_wall; rest_speed
+    [m/s]: pair approach speed below which e = 0 (0: rule off); up: unit vector against
+    gravity (zero without gravity); and the step's counters, one 0-d field per name of
+    COUNTS (i32) and VALUES (real): ``params.pair_collisions[None]``."""
 
     def __init__(self, real):
         self.real = real
@@ -66,21 +49,24 @@ class StepParams:
         self.size = ti.Vector.field(3, real, shape=())
         self.e = ti.field(real, shape=())
         self.e_wall = ti.field(real, shape=())
-        self.count = Slots(ti.i32, N_COUNTS)
-        self.vals = Slots(real, N_VALS)
+        self.counters = [ti.field(ti.i32, shape=()) for _ in COUNTS]
+        self.values = [ti.field(real, shape=()) for _ in VALUES]
+        for name, field in zip(COUNTS + VALUES, self.counters + self.values):
+            setattr(self, name, field)
         # host copies the step reads back in one launch (to_numpy costs ~0.3 ms per
         # field on the CPU backend, a kernel with array arguments ~0.08 ms:
         # tools/launch_overhead.py)
-        self.count_host = np.zeros(N_COUNTS, dtype=np.int32)
-        self.vals_host = np.zeros(N_VALS, dtype=np.float64 if real == ti.f64 else np.float32)
+        self._count_host = np.zeros(len(COUNTS), dtype=np.int32)
+        self._value_host = np.zeros(len(VALUES), dtype=np.float64 if real == ti.f64
+                                    else np.float32)
 
         @ti.kernel
         def copy_out(counts: ti.types.ndarray(dtype=ti.i32, ndim=1),
-                     vals: ti.types.ndarray(dtype=real, ndim=1)):
-            for k in ti.static(range(N_COUNTS)):
-                counts[k] = self.count[k]
-            for k in ti.static(range(N_VALS)):
-                vals[k] = self.vals[k]
+                     values: ti.types.ndarray(dtype=real, ndim=1)):
+            for k in ti.static(range(len(COUNTS))):
+                counts[k] = self.counters[k][None]
+            for k in ti.static(range(len(VALUES))):
+                values[k] = self.values[k][None]
 
         self._copy_out = copy_out
 
@@ -97,21 +83,23 @@ class StepParams:
         self.up[None] = (-scene.gravity / g).tolist() if g > 0 else [0.0, 0.0, 0.0]
 
     def read_back(self):
-        """(count, vals) of this step as numpy arrays (count_host and vals_host, reused:
-        copy them to keep them past the next call)."""
-        self._copy_out(self.count_host, self.vals_host)
-        return self.count_host, self.vals_host
+        """This step's counters as one namespace (attributes named as COUNTS and VALUES:
+        ints and floats), read in one launch."""
+        self._copy_out(self._count_host, self._value_host)
+        out = dict(zip(COUNTS, self._count_host.tolist()))
+        out.update(zip(VALUES, self._value_host.tolist()))
+        return types.SimpleNamespace(**out)
 
     @ti.func
     def reset_step(self):
         """Zero the per-step counters (call at kernel top level)."""
-        for k in ti.static(range(N_COUNTS)):
-            self.count[k] = 0
-        for k in ti.static(range(N_VALS)):
-            self.vals[k] = 0
+        for k in ti.static(range(len(COUNTS))):
+            self.counters[k][None] = 0
+        for k in ti.static(range(len(VALUES))):
+            self.values[k][None] = 0
 
     @ti.func
     def reset_detection(self):
         """Zero what one detection pass measures (call at kernel top level)."""
-        self.count[REMAINING] = 0
-        self.vals[OPEN_OVERLAP] = 0
+        self.remaining[None] = 0
+        self.open_overlap[None] = 0

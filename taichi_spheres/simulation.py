@@ -26,9 +26,6 @@ from .config import DEFAULT, Performance, Tuning
 from .contacts import decode_status, near_allowance
 from .grid import GridGeometry
 from . import observe
-from .params import (E_PAIRS, E_REST, E_WALLS, FLOOR, MULTI, OPEN_OVERLAP, PAIRS, PROJ_WORST,
-                     PROJECTED, PROJECTED_PAIRS, REMAINING, RESTED, SEP_OVERLAP, SUPPORTED,
-                     VIRIAL, VMAX2, WALL_RESTED, WALL_RESTS, WALLS)
 from .scene import Scene
 from .state import Features, State
 
@@ -185,7 +182,7 @@ class Simulation:
         self.last_step = dict(h=0.0, unresolved=0, max_overlap=0.0, sweeps=0)
         self.sim_seconds = 0.0   # wall-clock time spent in advance()
         self._motion.measure_vmax()
-        self._vmax2 = float(self._params.vals[VMAX2])
+        self._vmax2 = float(self._params.vmax2[None])
         self._resting = False     # a sphere was supported by the floor in the last step
 
     # ---- public API ----
@@ -279,7 +276,7 @@ class Simulation:
         if time is not None:
             self.time = float(time)
         self._motion.measure_vmax()
-        self._vmax2 = float(self._params.vals[VMAX2])
+        self._vmax2 = float(self._params.vmax2[None])
 
     def checkpoint(self) -> dict:
         """Everything needed to continue bit-for-bit: state, time, step bound, counters."""
@@ -346,6 +343,29 @@ class Simulation:
     def step(self, h: float) -> None:
         """One step of length h [s] (does not advance ``time``; use advance)."""
         self._check()
+        sweeps = self._collide_step(h)
+        c = self._params.read_back()
+        remaining = int(c.remaining)
+        overlap = float(c.sep_overlap)
+        if remaining > 0:
+            overlap = max(overlap, float(c.open_overlap))
+        # projection only where overlaps can build up step after step: contacts left
+        # at the sweep limit, or spheres resting under gravity (a gas's leftover
+        # overlaps separate by themselves); a fused step has already done it
+        if c.projected:
+            overlap = float(c.proj_worst)
+            self._totals["projected_steps"] += 1
+            self._totals["projected_pairs"] += int(c.projected_pairs)
+        elif overlap > self.overlap_tolerance and (remaining > 0 or self.features.supports):
+            overlap = self._project()
+            # the counters again: spheres the projection put back inside the box
+            # count as wall events (and their energy), as in a fused step
+            c = self._params.read_back()
+        self._book_step(c, h, sweeps, remaining, overlap)
+
+    def _collide_step(self, h: float) -> int:
+        """Drift, grid, detection and detect/resolve sweeps of one step of length h [s]
+        (fused, or kernel by kernel); returns the sweeps it ran."""
         sweeps = 0
         remaining = None
         if self._fused is not None:
@@ -367,47 +387,32 @@ class Simulation:
                 sweeps += 1
                 if far:
                     remaining = self._rebuild()
-        counts, v = self._params.read_back()
+        return sweeps
+
+    #: stats totals that add up the step counter of the same name (params.COUNTS/VALUES)
+    _SUMMED = ("pair_collisions", "wall_collisions", "wall_rests", "multi_collision_spheres",
+               "rest_collisions", "wall_rest_collisions", "supported_collisions",
+               "energy_pair_restitution", "energy_wall_restitution", "energy_rest_rule",
+               "virial")
+
+    def _book_step(self, c, h, sweeps, remaining, overlap):
+        """Add a step's counters ``c`` (params.read_back) to the totals; keep its step
+        bound and whether a sphere rests on the floor."""
         t = self._totals
-        remaining = int(counts[REMAINING])
-        overlap = float(v[SEP_OVERLAP])
-        if remaining > 0:
-            overlap = max(overlap, float(v[OPEN_OVERLAP]))
-        # projection only where overlaps can build up step after step: contacts left
-        # at the sweep limit, or spheres resting under gravity (a gas's leftover
-        # overlaps separate by themselves); a fused step has already done it
-        if counts[PROJECTED]:
-            overlap = float(v[PROJ_WORST])
-            t["projected_steps"] += 1
-            t["projected_pairs"] += int(counts[PROJECTED_PAIRS])
-        elif overlap > self.overlap_tolerance and (remaining > 0 or self.features.supports):
-            overlap = self._project()
-            # the counters again: spheres the projection put back inside the box
-            # count as wall events (and their energy), as in a fused step
-            counts, v = self._params.read_back()
         t["steps"] += 1
         t["sweeps"] += sweeps
-        t["pair_collisions"] += int(counts[PAIRS])
-        t["wall_collisions"] += int(counts[WALLS])
-        t["wall_rests"] += int(counts[WALL_RESTS])
-        t["multi_collision_spheres"] += int(counts[MULTI])
-        t["rest_collisions"] += int(counts[RESTED])
-        t["wall_rest_collisions"] += int(counts[WALL_RESTED])
-        t["supported_collisions"] += int(counts[SUPPORTED])
-        t["energy_pair_restitution"] += float(v[E_PAIRS])
-        t["energy_wall_restitution"] += float(v[E_WALLS])
-        t["energy_rest_rule"] += float(v[E_REST])
-        t["virial"] += float(v[VIRIAL])
+        for name in self._SUMMED:
+            t[name] += getattr(c, name)
         if remaining > 0:
             t["unresolved"] += remaining
             t["sweep_limit_hits"] += 1
         t["max_overlap"] = max(t["max_overlap"], overlap)
-        self._vmax2 = float(v[VMAX2])
-        self._resting = bool(counts[FLOOR] > 0)
+        self._vmax2 = float(c.vmax2)
+        self._resting = bool(c.on_floor > 0)
         self.last_step = dict(h=h, unresolved=remaining, max_overlap=overlap, sweeps=sweeps,
-                              pair_collisions=int(counts[PAIRS]),
-                              wall_collisions=int(counts[WALLS]),
-                              multi_collision_spheres=int(counts[MULTI]))
+                              pair_collisions=int(c.pair_collisions),
+                              wall_collisions=int(c.wall_collisions),
+                              multi_collision_spheres=int(c.multi_collision_spheres))
 
     def _rebuild(self) -> int:
         """A sphere moved farther than the grid's margin since the grid was built, so the

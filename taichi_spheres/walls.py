@@ -24,8 +24,7 @@ kinetic energy, counted in ``stats['wall_rests']``.
 import taichi as ti
 
 from .config import DEFAULT, Tuning
-from .params import (E_REST, E_WALLS, FLOOR, MULTI, VMAX2, WALL_RESTED, WALLS, WALL_RESTS,
-                     StepParams)
+from .params import StepParams
 from .state import Features, SphereState
 
 
@@ -110,7 +109,7 @@ class Motion:
             if ti.static(self.f.supports):
                 if on_floor and v.dot(self.params.up[None]) <= self.params.rest_speed[None]:
                     if self.state.support[i] == 0:
-                        ti.atomic_add(self.params.count[FLOOR], 1)
+                        ti.atomic_add(self.params.on_floor[None], 1)
                     self.state.support[i] = 1
         self.state.x[i] = x
         self.state.v[i] = v
@@ -175,7 +174,7 @@ class Motion:
                 else:
                     va = ti.min(v[a], 0)
                 moved += -d
-                ti.atomic_add(self.params.count[WALL_RESTS], 1)
+                ti.atomic_add(self.params.wall_rests[None], 1)
             x[a] = xa
             v[a] = va
             if last:
@@ -195,7 +194,7 @@ class Motion:
             xa = hi_c - dn
         va = (wn + acc * s) * side * -1
         moved += (wn - wc) * s
-        ti.atomic_add(self.params.count[WALLS], 1)
+        ti.atomic_add(self.params.wall_collisions[None], 1)
         self.count_hit(i)
         return xa, va, moved
 
@@ -221,7 +220,7 @@ class Motion:
             if side > 0:
                 xa = hi_c + d
             moved += -2 * d
-            ti.atomic_add(self.params.count[WALLS], 1)
+            ti.atomic_add(self.params.wall_collisions[None], 1)
             self.count_hit(i)
         else:
             w2 = ti.max(w * w - 2 * acc * d, 0)
@@ -229,7 +228,7 @@ class Motion:
             if w < 0:
                 wn = self.rebound(i, wn, e_w, floor)
             moved += -d
-            ti.atomic_add(self.params.count[WALL_RESTS], 1)
+            ti.atomic_add(self.params.wall_rests[None], 1)
         va = wn * side * -1
         return xa, va, moved
 
@@ -247,18 +246,18 @@ class Motion:
             if floor and speed < self.params.rest_speed[None]:
                 out = ti.cast(0, self.real)
                 rested = True
-                ti.atomic_add(self.params.count[WALL_RESTED], 1)
-                ti.atomic_add(self.params.vals[E_REST], ti.cast(0.5, self.real) * self.state.mass_of(i) * speed * speed)
+                ti.atomic_add(self.params.wall_rest_collisions[None], 1)
+                ti.atomic_add(self.params.energy_rest_rule[None], ti.cast(0.5, self.real) * self.state.mass_of(i) * speed * speed)
         if ti.static(not self.f.elastic_walls):
             if not rested:
-                ti.atomic_add(self.params.vals[E_WALLS], ti.cast(0.5, self.real) * self.state.mass_of(i) * (speed * speed - out * out))
+                ti.atomic_add(self.params.energy_wall_restitution[None], ti.cast(0.5, self.real) * self.state.mass_of(i) * (speed * speed - out * out))
         return out
 
     @ti.func
     def count_hit(self, i):
         """One more collision of sphere i in this step (counts spheres with several)."""
         if ti.atomic_add(self.state.hits[i], 1) == 1:
-            ti.atomic_add(self.params.count[MULTI], 1)
+            ti.atomic_add(self.params.multi_collision_spheres[None], 1)
 
     @ti.func
     def _drift_body(self):
@@ -280,11 +279,11 @@ class Motion:
             else:
                 self.state.x[i] += self.state.v[i] * h
             self.walls_and_wrap(i)
-            ti.atomic_max(self.params.vals[VMAX2], self.state.v[i].norm_sqr())
+            ti.atomic_max(self.params.vmax2[None], self.state.v[i].norm_sqr())
 
     @ti.func
     def _measure_vmax_body(self):
-        """vals[VMAX2] = max |v|^2 over all spheres [m^2/s^2]."""
-        self.params.vals[VMAX2] = 0
+        """params.vmax2 = max |v|^2 over all spheres [m^2/s^2]."""
+        self.params.vmax2[None] = 0
         for i in range(self.state.n_spheres[None]):
-            ti.atomic_max(self.params.vals[VMAX2], self.state.v[i].norm_sqr())
+            ti.atomic_max(self.params.vmax2[None], self.state.v[i].norm_sqr())

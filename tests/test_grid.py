@@ -63,7 +63,7 @@ def test_grid_detection_matches_brute_force(arch, periodic, poly):
     np.testing.assert_array_equal(pairs, ref)
     # the production pass: every pair counted once, each for exactly one owner cell
     sim._contacts.detect_all()
-    assert sim._params.count[0] == len(ref)
+    assert sim._params.remaining[None] == len(ref)
     assert sim._contacts.active.to_numpy().sum() == len(ref)
     assert sim._contacts.n_active[None] == np.count_nonzero(sim._contacts.active.to_numpy())
 
@@ -79,7 +79,6 @@ def test_walks_around_touched_spheres_match_brute_force(arch, precision, periodi
     every sphere touched (each pair is then examined once, from its lower id). Leaving
     M out of the reach fails this test."""
     import taichi as ti
-    from taichi_spheres.params import MOVED, REMAINING
 
     scene = _overlapping_scene(3000, periodic, seed=4, poly=poly)
     sim = ts.Simulation(scene, arch=arch, precision=precision,
@@ -96,13 +95,13 @@ def test_walks_around_touched_spheres_match_brute_force(arch, precision, periodi
     @ti.kernel
     def walk_around_all() -> ti.i32:
         c.reset_detection_state()
-        c.params.vals[MOVED] = ti.cast(moved, c.real)
+        c.params.moved[None] = ti.cast(moved, c.real)
         for i in range(c.n):
             c.grid.refresh(i)
             c.mark_touched(i)
         c.detect_around_touched(False)
         c.clear_marks(False)
-        return c.params.count[REMAINING]
+        return c.params.remaining[None]
 
     found = walk_around_all()
     st = sim.state()

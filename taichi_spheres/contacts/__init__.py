@@ -15,8 +15,8 @@ import numpy as np
 import taichi as ti
 
 from ..config import DEFAULT, Tuning
-from ..grid import BLOCK_PAIRS, FORWARD_ROWS, Grid
 from ..params import StepParams
+from ..grid import BLOCK_PAIRS, FORWARD_ROWS, Grid
 from ..state import Features, SphereState
 from ..walls import Motion
 from .detection import Detection
@@ -211,7 +211,7 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
 
     # ---- the step's entry points ----
     def detect(self):
-        """Full detection (fills ``active`` and count[REMAINING]) on a freshly built
+        """Full detection (fills ``active`` and params.remaining) on a freshly built
         grid; returns (status, from_list). From the near lists while they are
         complete and at most 1 sphere in near_fast_limit moved more than the allowance
         since a full scan made them (those are scanned around in the grid), else by a

@@ -7,7 +7,6 @@ A mixin of :class:`taichi_spheres.contacts.Contacts` (its fields and options).
 import taichi as ti
 
 from ..grid import FORWARD_ROWS
-from ..params import MOVED, OPEN_OVERLAP, REMAINING, SEP_OVERLAP
 
 
 class Detection:
@@ -16,13 +15,13 @@ class Detection:
 
     @ti.func
     def status(self):
-        """2 x count[REMAINING] (approaching overlaps found by the last detection) + 1
+        """2 x params.remaining (approaching overlaps found by the last detection) + 1
         if a sphere moved farther than the grid's slack since the grid was built (the
         grid must be rebuilt before the next sweep). Decode with :func:`decode_status`."""
         far = 0
-        if self.params.vals[MOVED] > self.grid.slack[None]:
+        if self.params.moved[None] > self.grid.slack[None]:
             far = 1
-        return 2 * self.params.count[REMAINING] + far
+        return 2 * self.params.remaining[None] + far
 
     @ti.func
     def examine(self, xi, i, q, ci, record: ti.template(), only_new: ti.template()):
@@ -62,19 +61,19 @@ class Detection:
                             self.cell_pairs[owner, found] = ti.Vector([j, i])
                     if found == 0:
                         self.active_list[ti.atomic_add(self.n_active[None], 1)] = owner
-                    ti.atomic_add(self.params.count[REMAINING], 1)
-                    ti.atomic_max(self.params.vals[OPEN_OVERLAP], rel)
+                    ti.atomic_add(self.params.remaining[None], 1)
+                    ti.atomic_max(self.params.open_overlap[None], rel)
                 else:
-                    ti.atomic_max(self.params.vals[SEP_OVERLAP], rel)
+                    ti.atomic_max(self.params.sep_overlap[None], rel)
         return dd
 
     @ti.func
     def reset_detection_state(self):
         """What every full detection starts from (call at kernel top level). It always
         runs on a freshly built grid, so the distance moved since the build
-        (vals[MOVED]) starts again from 0."""
+        (params.moved) starts again from 0."""
         self.params.reset_detection()
-        self.params.vals[MOVED] = 0
+        self.params.moved[None] = 0
         self.clear_active(ti.static(self.serial_light))
         ti.loop_config(serialize=ti.static(self.serial_light))
         for i in range(self.state.n_spheres[None]):
@@ -84,7 +83,7 @@ class Detection:
 
     @ti.func
     def _detect_all_body(self):
-        """Half-stencil scan of every sphere: fills ``active`` and count[REMAINING]
+        """Half-stencil scan of every sphere: fills ``active`` and params.remaining
         (and the near lists, when kept)."""
         self.reset_detection_state()
         if ti.static(self.near_lists):
@@ -164,7 +163,7 @@ class Detection:
     def examine_around(self, i, p):
         """examine (only_new) sphere i, at slot p of the grid, against every sphere of
         the cells among its 27 that can hold a sphere overlapping it: a neighbour across
-        a face only if i is within r_i + r_max + M of that face, M = vals[MOVED] (no
+        a face only if i is within r_i + r_max + M of that face, M = params.moved (no
         sphere moved farther since the grid was built; plus a round-off margin): the
         same pairs as all 27 cells (prune_walks = False), with fewer rows and cells
         visited."""
@@ -173,7 +172,7 @@ class Detection:
         lower = ti.Vector([1, 1, 1])
         upper = ti.Vector([1, 1, 1])
         if ti.static(self.perf.prune_walks):
-            reach = self.state.rad(i) + self.params.vals[MOVED] + self.walk_reach[None]
+            reach = self.state.rad(i) + self.params.moved[None] + self.walk_reach[None]
             lower, upper = self.grid.sides_within(self.min_image(xi - self.grid.corner(ci)), reach)
         for dx in range(-lower[0], upper[0] + 1):
             for dy in range(-lower[1], upper[1] + 1):

@@ -19,7 +19,6 @@ A mixin of :class:`taichi_spheres.contacts.Contacts` (its fields and options).
 
 import taichi as ti
 
-from ..params import E_PAIRS, E_REST, MOVED, PAIRS, RESTED, SUPPORTED, VIRIAL, VMAX2
 
 
 class PairRule:
@@ -193,8 +192,8 @@ class PairRule:
             if rest:
                 dvi = -un * wi * n
                 dvj = un * wj * n
-                ti.atomic_add(self.params.vals[E_REST], 0.5 * meff * un * un)
-                ti.atomic_add(self.params.count[RESTED], 1)
+                ti.atomic_add(self.params.energy_rest_rule[None], 0.5 * meff * un * un)
+                ti.atomic_add(self.params.rest_collisions[None], 1)
             else:
                 du = -(1 + e) * un * n
                 loss = 0.5 * meff * (1 - e * e) * un * un
@@ -205,7 +204,7 @@ class PairRule:
                 dvi = wi * du
                 dvj = -wj * du
                 if ti.static(not self.f.elastic):
-                    ti.atomic_add(self.params.vals[E_PAIRS], loss)
+                    ti.atomic_add(self.params.energy_pair_restitution[None], loss)
         return dvi, dvj
 
     @ti.func
@@ -223,11 +222,11 @@ class PairRule:
         self.state.moved[j] += dvj.norm() * s
         self.motion.count_hit(i)
         self.motion.count_hit(j)
-        ti.atomic_add(self.params.vals[VIRIAL], rc.dot(dvi) * self.state.mass_of(i))
-        ti.atomic_add(self.params.count[PAIRS], 1)
-        ti.atomic_max(self.params.vals[VMAX2], ti.max(self.state.v[i].norm_sqr(),
+        ti.atomic_add(self.params.virial[None], rc.dot(dvi) * self.state.mass_of(i))
+        ti.atomic_add(self.params.pair_collisions[None], 1)
+        ti.atomic_max(self.params.vmax2[None], ti.max(self.state.v[i].norm_sqr(),
                                                       self.state.v[j].norm_sqr()))
-        ti.atomic_max(self.params.vals[MOVED], ti.max(self.state.moved[i], self.state.moved[j]))
+        ti.atomic_max(self.params.moved[None], ti.max(self.state.moved[i], self.state.moved[j]))
 
     @ti.func
     def supported_stop(self, i, j, n, un, s):
@@ -264,9 +263,9 @@ class PairRule:
             if gain <= ti.static(2 * self.approach_eps) * scale:
                 done = True
                 self.state.support[upper] = 1
-                ti.atomic_add(self.params.vals[E_REST], -self.state.mass_of(upper) * gain)
-                ti.atomic_add(self.params.count[RESTED], 1)
-                ti.atomic_add(self.params.count[SUPPORTED], 1)
+                ti.atomic_add(self.params.energy_rest_rule[None], -self.state.mass_of(upper) * gain)
+                ti.atomic_add(self.params.rest_collisions[None], 1)
+                ti.atomic_add(self.params.supported_collisions[None], 1)
         return done, dvi, dvj
 
     @ti.func

@@ -14,7 +14,6 @@ A mixin of :class:`taichi_spheres.contacts.Contacts` (its fields and options).
 import taichi as ti
 
 from ..grid import BLOCK_PAIRS
-from ..params import MOVED, REMAINING
 
 #: Most colours a grid can have: 3 per axis (an odd periodic axis).
 MAX_COLOURS = 27
@@ -192,14 +191,14 @@ class ColourSweeps:
     @ti.func
     def after_sweep(self, serial: ti.template()):
         """Put the spheres a sweep touched back inside the box (a wall bounce there
-        counts toward the grid's move bound, vals[MOVED]), copy their positions into
+        counts toward the grid's move bound, params.moved), copy their positions into
         grid.xs, detect new approaching overlaps around them, and clear their marks."""
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
         for t in range(self.n_touched[None]):
             i = self.touched[t]
             self.motion.walls_and_wrap(i)
             # a wall bounce moves the sphere too: fold it into the grid's move bound
-            ti.atomic_max(self.params.vals[MOVED], self.state.moved[i])
+            ti.atomic_max(self.params.moved[None], self.state.moved[i])
             self.grid.refresh(i)
             self.earliest[i] = -1
         self.params.reset_detection()
@@ -223,7 +222,7 @@ class ColourSweeps:
         rebuild the grid); returns how many ran. Call where everything runs serially
         (the fused step)."""
         done = 0
-        while self.params.count[REMAINING] > 0 and done < max_sweeps:
+        while self.params.remaining[None] > 0 and done < max_sweeps:
             self.resolve_colours_serially()
             self.after_sweep(True)
             done += 1
