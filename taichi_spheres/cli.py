@@ -180,8 +180,8 @@ def _add_run_arguments(run):
                      help=f"run even when the estimated work is beyond what real scenes need "
                           f"(more than {workload.MAX_STEPS:.0e} steps)")
     run.add_argument("--quiet", action="store_true",
-                     help="no progress bar (status lines still come every --status-every "
-                          "seconds and on SIGUSR1)")
+                     help="no progress bar (the bar is shown only on a terminal; status lines "
+                          "still come every --status-every seconds and on SIGUSR1)")
     run.add_argument("--status-every", type=_positive(float), default=STATUS_EVERY,
                      metavar="SECONDS",
                      help="print a status line when none was printed for this long")
@@ -549,7 +549,7 @@ def cmd_run(scene: Scene, args):
             print("\ninterrupted before the first frame; nothing written", file=sys.stderr)
             return EXIT_INTERRUPTED
         progress.steps = work.steps
-        progress.attach(sim)
+        progress.attach(sim, start_frame)
         outputs = RunOutputs(scene, settings, renderer, start_frame, sim)
         status = _run_frames(sim, outputs, progress, settings, start_frame)
     _print_summary(sim, outputs.render_seconds)
@@ -567,10 +567,12 @@ def _run_frames(sim, outputs: RunOutputs, progress, settings, start_frame):
             progress.frame_done(frame, final=frame == settings.frames - 1)
     except KeyboardInterrupt:
         status = EXIT_INTERRUPTED
+        progress.close()
         print(f"\ninterrupted at frame {frame} (t = {sim.time:.4g} s)"
               + (f"; continue with --resume {settings.ckpt_path}"
                  if settings.checkpoint_every else ""), file=sys.stderr)
     except Exception as exc:   # keep what was written, then re-raise after closing
+        progress.close()
         print(f"\nerror at frame {frame}: {exc!r}", file=sys.stderr)
         raise
     finally:

@@ -1,18 +1,21 @@
 """Progress of a ``taichi-spheres run`` on stderr.
 
-A progress bar redrawn as frames are done (unless --quiet), and status lines that a run
-prints on its own whenever it printed nothing for ``--status-every`` seconds (default
-STATUS_EVERY; also with --quiet, also in the middle of a long frame) or at once when it
-receives SIGUSR1 (``kill -USR1 PID``, as ``dd`` does) or SIGINFO (Ctrl-T, on BSD and
-macOS).
+A tqdm progress bar in frames, with rate and ETA (unless --quiet; tqdm shows it only
+when stderr is a terminal), and status lines that a run prints on its own whenever it
+printed nothing for ``--status-every`` seconds (default STATUS_EVERY; also with --quiet,
+also in the middle of a long frame) or at once when it receives SIGUSR1
+(``kill -USR1 PID``, as ``dd`` does) or SIGINFO (Ctrl-T, on BSD and macOS).
 """
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
 import time
+
+from tqdm import tqdm
 
 __all__ = ["Progress", "status_reports", "STATUS_EVERY", "STATUS_SIGNALS"]
 
@@ -21,46 +24,63 @@ __all__ = ["Progress", "status_reports", "STATUS_EVERY", "STATUS_SIGNALS"]
 STATUS_EVERY = 60.0
 #: Signals that print a status line at once, where the system has them.
 STATUS_SIGNALS = ("SIGUSR1", "SIGINFO")
-#: A terminal's progress bar is redrawn at most this often [s].
+#: The progress bar is redrawn at most this often [s].
 BAR_REDRAW = 0.2
-#: Width of the progress bar [characters].
-BAR_WIDTH = 24
+#: Bar width and screen height [characters, lines] where the terminal reports none.
+FALLBACK_COLUMNS, FALLBACK_LINES = 100, 24
 
 
 class Progress:
     """Progress bar and status lines of one run of ``duration`` [s] in ``frames`` frames.
 
     ``steps`` is the estimated step count (None: unknown); :meth:`attach` gives it the
-    Simulation once built (status lines before that say the run is setting up)."""
+    Simulation once built (status lines before that say the run is setting up) and
+    opens the bar."""
 
     def __init__(self, duration, frames, quiet=False, status_every=STATUS_EVERY, steps=None):
         self.duration, self.frames, self.quiet = duration, frames, quiet
         self.status_every, self.steps = status_every, steps
-        self.tty = sys.stderr.isatty()
         self.t0 = self.last_line = time.perf_counter()
         self.sim, self.frame = None, -1
-        self._start_time, self._last_tenth = 0.0, -1
-        self._open_line = False       # a bar was drawn without its newline
+        self.bar = None
+        self._start_time = 0.0
         self._lock = threading.RLock()
 
-    def attach(self, sim):
-        """Report on ``sim`` from its current time on (a resumed run starts later)."""
+    def attach(self, sim, first_frame=0):
+        """Report on ``sim`` from its current time on (a resumed run starts later, at
+        frame ``first_frame``)."""
         self.sim, self._start_time = sim, sim.time
+        self.frame = first_frame - 1
+        if not self.quiet:
+            # disable=None: no bar unless stderr is a terminal (logs get status lines)
+            self.bar = tqdm(total=self.frames, initial=first_frame, unit="frame",
+                            file=sys.stderr, disable=None, mininterval=BAR_REDRAW,
+                            leave=True, **_unknown_terminal_size())
 
     def frame_done(self, frame, final=False):
-        """Frame ``frame`` (0-based) is written: redraw the bar, or a status line when due."""
-        self.frame = frame
-        now = time.perf_counter()
-        if self.quiet:
-            if not final:
+        """Frame ``frame`` (0-based) is written: advance the bar, or print a status line
+        when one is due."""
+        with self._lock:
+            done, self.frame = frame - self.frame, frame
+            if self.bar is not None and not self.bar.disable:
+                st = self.sim.stats
+                self.bar.set_postfix_str(
+                    f"t={self.sim.time:.3f}/{self.duration:g} s, steps={st['steps']}, "
+                    f"collisions={st['pair_collisions']}+{st['wall_collisions']} wall",
+                    refresh=False)
+                self.bar.update(done)
+                self.last_line = time.perf_counter()
+            elif not final:
                 self.status_if_due()
-            return
-        tenth = int(self._done() * 10)
-        if not final and (self.tty and now - self.last_line < BAR_REDRAW or
-                          not self.tty and tenth == self._last_tenth):
-            return
-        self._last_tenth = tenth
-        self._emit(self._bar() + "  " + self._fields(), newline=final or not self.tty)
+            if final:
+                self.close()
+
+    def close(self):
+        """Close the bar (its last state stays on the terminal); safe to call twice."""
+        with self._lock:
+            if self.bar is not None:
+                self.bar.close()
+                self.bar = None
 
     def status_if_due(self):
         """Print a status line if none was printed for status_every seconds."""
@@ -69,21 +89,22 @@ class Progress:
                 self.status()
 
     def status(self):
-        """Print a status line now (own line, also with --quiet)."""
+        """Print a status line now (own line above the bar, also with --quiet)."""
         if self.sim is None:
             text = f"setting up (compiling kernels), {time.perf_counter() - self.t0:.0f} s"
         else:
             text = f"frame {self.frame + 1}/{self.frames}  " + self._fields()
-        self._emit("status: " + text, newline=True, own_line=True)
+        with self._lock:
+            tqdm.write("status: " + text, file=sys.stderr)
+            sys.stderr.flush()
+            self.last_line = time.perf_counter()
 
     def _done(self):
+        """Fraction of the run's simulated time done (0 before attach)."""
         if self.sim is None:
             return 0.0
         span = self.duration - self._start_time
         return 1.0 if span <= 0 else min(1.0, (self.sim.time - self._start_time) / span)
-
-    def _bar(self):
-        return f"[{'#' * int(BAR_WIDTH * self._done()):<{BAR_WIDTH}}]"
 
     def _fields(self):
         st = self.sim.stats
@@ -95,13 +116,18 @@ class Progress:
                 f"collisions={st['pair_collisions']}+{st['wall_collisions']} wall  "
                 f"elapsed {elapsed:.0f} s  ETA {eta}")
 
-    def _emit(self, text, newline, own_line=False):
-        with self._lock:
-            lead = "\n" if own_line and self._open_line else ("\r" if self.tty and not own_line
-                                                              else "")
-            print(lead + text, end="\n" if newline else "", file=sys.stderr, flush=True)
-            self._open_line = not newline
-            self.last_line = time.perf_counter()
+
+def _unknown_terminal_size() -> dict:
+    """tqdm's ncols and nrows [characters, lines] for a terminal that reports a size of
+    0 x 0 (some pseudo-terminals), where tqdm would hide the bar; {} otherwise (tqdm
+    follows the terminal's width)."""
+    try:
+        size = os.get_terminal_size(sys.stderr.fileno())
+    except (OSError, ValueError, AttributeError):
+        return {}
+    if size.columns and size.lines:
+        return {"dynamic_ncols": True}
+    return {"ncols": FALLBACK_COLUMNS, "nrows": FALLBACK_LINES}
 
 
 @contextlib.contextmanager
@@ -122,6 +148,7 @@ def status_reports(progress: Progress):
     try:
         yield progress
     finally:
+        progress.close()
         stop.set()
         watcher.join()
         for signum, handler in previous.items():
