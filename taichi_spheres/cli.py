@@ -1,9 +1,10 @@
-"""Command line: ``taichi-spheres run SCENE``, ``info SCENE`` and ``sweep SCENE``.
+"""Command line: ``taichi-spheres run SCENE``, ``info SCENE``, ``sweep SCENE`` and
+``plot RUN.csv``.
 
 Exit codes: 0 done, 1 some runs of a sweep failed (their rows say why), 2 bad input
-(scene, options, output path, a run far beyond what real scenes need: see
-workload.MAX_STEPS), 3 rendering not available, 130 interrupted (the frames or sweep
-rows written so far are kept).
+(scene, options, output path, a CSV without the diagnostics columns, a run far beyond
+what real scenes need: see workload.MAX_STEPS), 3 rendering or plotting not available,
+130 interrupted (the frames or sweep rows written so far are kept).
 
 Parsing the command line, ``--help`` and reading the scene do not import Taichi; the
 engine is imported when ``info`` or ``run`` needs it. Details: docs/cli.md.
@@ -106,6 +107,12 @@ def build_parser():
         "sweep", formatter_class=_HelpFormatter,
         help="run a scene once per combination of parameter values (on Dask), one CSV row "
              "per run"))
+    plot = sub.add_parser("plot", formatter_class=_HelpFormatter,
+                          help="PNG plots of a run's diagnostics CSV: energy, collisions per "
+                               "second, overlap against time (needs matplotlib)")
+    plot.add_argument("csv", help="diagnostics CSV written by run (OUT.csv)")
+    plot.add_argument("-o", "--output", default=None, metavar="PATH.png",
+                      help="PNG to write (default: the CSV's path with .png)")
     return p
 
 
@@ -190,6 +197,8 @@ def _add_run_arguments(run):
 def main(argv=None):
     args = build_parser().parse_args(argv)
     os.environ.setdefault(TAICHI_BANNER_ENV, "0")
+    if args.command == "plot":
+        return cmd_plot(args)
     try:
         scene = load_scene(args.scene)
     except ValueError as exc:
@@ -200,6 +209,22 @@ def main(argv=None):
     if args.command == "sweep":
         return cmd_sweep(scene, args)
     return cmd_run(scene, args)
+
+
+def cmd_plot(args):
+    """Write the PNG plots of a diagnostics CSV (plot.py); 2 for a bad CSV or output
+    path, 3 without matplotlib."""
+    from .plot import PlotUnavailable, plot_diagnostics
+    try:
+        out = plot_diagnostics(args.csv, args.output)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except PlotUnavailable as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_NO_RENDER
+    print(f"wrote {out}", file=sys.stderr)
+    return 0
 
 
 def compile_mode(choice: str, n: int) -> str:
