@@ -287,9 +287,23 @@ def cmd_info(scene: Scene, args):
     print("compiled in:")
     for line in features.describe():
         print(f"  {line}")
+    print(f"schedule ({args.arch}):")
+    for line in schedule_for(scene, geom, args.arch, getattr(args, "fused", False)).describe():
+        print(f"  {line}")
     print(f"device memory: about {memory / 2**20:.2f} MiB ({memory / scene.n:.0f} B per sphere, "
           f"grid included)")
     return _print_info_work(scene, args, precision, duration, fps, fraction)
+
+
+def schedule_for(scene: Scene, geom, arch: str, fused: bool):
+    """The engine.Schedule a Simulation of ``scene`` on ``arch`` takes (default options),
+    without initialising Taichi ('gpu' counts as a GPU)."""
+    from .config import DEFAULT
+    from .engine import Schedule
+    from .simulation import _keeps_near_lists
+    perf = DEFAULT.performance
+    return Schedule.plan(scene.n, arch == "cpu", _keeps_near_lists(scene, geom, perf), fused,
+                         perf)
 
 
 def _print_info_work(scene, args, precision, duration, fps, fraction):

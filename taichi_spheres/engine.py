@@ -23,7 +23,7 @@ from __future__ import annotations
 import dataclasses
 import weakref
 
-from .config import Tuning
+from .config import Performance, Tuning
 from .contacts import Contacts
 from .fused import FusedStep
 from .grid import Grid, GridGeometry
@@ -33,6 +33,51 @@ from .state import Features, SphereState
 from .walls import Motion
 
 __all__ = ["EngineKey", "Engine", "acquire", "capacity_for"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Schedule:
+    """Which path a step takes, decided once per Simulation from the sphere count, the
+    arch and the options (config.Performance):
+
+    serial_light: the light loops (drift, grid build, re-binning) run serially (CPU,
+        below serial_light_below spheres: a parallel launch costs more than the loop);
+    serial_heavy: every loop runs serially, detection and sweeps too (CPU, below
+        serial_heavy_below); the fused step is available;
+    serial_few: a sweep with few pending pairs runs serially, one with more resolves
+        serially and detects in parallel (CPU, above serial_heavy_below); otherwise a
+        sweep launches one parallel kernel per colour (always on GPUs);
+    near_lists: detection keeps near lists (from near_lists_from spheres on, where the
+        cells leave room for moves);
+    fused: each step is one or two kernel launches (fused.py; asked for, and
+        serial_heavy)."""
+
+    serial_light: bool
+    serial_heavy: bool
+    serial_few: bool
+    near_lists: bool
+    fused: bool
+
+    @classmethod
+    def plan(cls, n: int, cpu: bool, near_lists: bool, fused: bool,
+             perf: Performance) -> "Schedule":
+        """The schedule of n spheres on the CPU (cpu) or a GPU."""
+        heavy = cpu and n < perf.serial_heavy_below
+        return cls(serial_light=cpu and n < perf.serial_light_below, serial_heavy=heavy,
+                   serial_few=cpu and not heavy, near_lists=near_lists, fused=fused and heavy)
+
+    def describe(self) -> list:
+        """Human-readable lines (``taichi-spheres info``)."""
+        sweeps = ("serial, all colours in one launch" if self.serial_heavy else
+                  "serial below few_pairs pending pairs, serial resolve with parallel "
+                  "detection below serial_resolve_pairs, else one launch per colour"
+                  if self.serial_few else "one parallel launch per colour")
+        return ["step: " + ("fused (one or two kernel launches)" if self.fused
+                            else "kernel by kernel"),
+                "drift and grid build: " + ("serial" if self.serial_light else "parallel"),
+                "detection: " + ("serial" if self.serial_heavy else "parallel") +
+                (", from near lists" if self.near_lists else ", full grid scans"),
+                "sweeps: " + sweeps]
 
 
 @dataclasses.dataclass(frozen=True)

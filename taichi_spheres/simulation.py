@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+import types
 
 import numpy as np
 import taichi as ti
@@ -161,13 +162,18 @@ class Simulation:
         self.geometry = GridGeometry.for_scene(scene, step_fraction, self.tuning.performance)
         self.runtime = runtime.ensure(arch, precision, threads)
         self.precision = self.runtime.precision
-        key = self._engine_key()
-        self._engine = engines.acquire(key, scene.n, self.geometry.n_cells)
+        #: which path a step takes (engine.Schedule)
+        self.schedule = engines.Schedule.plan(
+            scene.n, self.runtime.is_cpu,
+            _keeps_near_lists(scene, self.geometry, self.tuning.performance), fused,
+            self.tuning.performance)
+        self._engine = engines.acquire(self._engine_key(self.schedule), scene.n,
+                                       self.geometry.n_cells)
         self._parked = (scene.x, scene.v)
         self._bind()
         self._overlap_tolerance = self.tuning.physics.overlap_tolerance
         # small CPU systems can run each step in one or two serial kernels (fused.py)
-        self._fused = self._engine.fused_step() if fused and key.serial_heavy else None
+        self._fused = self._engine.fused_step() if self.schedule.fused else None
         self._r_min = float(scene.radius.min())
         self._g = float(np.linalg.norm(scene.gravity))
         self.time = 0.0
@@ -444,19 +450,13 @@ class Simulation:
         return float(proj.worst[None])
 
     # ---- the engine this Simulation runs on ----
-    def _engine_key(self) -> engines.EngineKey:
-        """What this Simulation's kernels compile in (engine.EngineKey): on the CPU,
-        loops run serially below the Performance thresholds (a parallel launch costs
-        ~150 us there)."""
-        cpu = self.runtime.is_cpu
-        n = self.scene.n
-        perf = self.tuning.performance
+    def _engine_key(self, schedule: engines.Schedule) -> engines.EngineKey:
+        """What this Simulation's kernels compile in (engine.EngineKey)."""
         return engines.EngineKey(
             generation=self.runtime.generation,
             real=ti.f64 if self.precision == "f64" else ti.f32, features=self.features,
-            serial_light=cpu and n < perf.serial_light_below,
-            serial_heavy=cpu and n < perf.serial_heavy_below, serial_few=cpu,
-            near_lists=_keeps_near_lists(self.scene, self.geometry, perf), tuning=self.tuning)
+            serial_light=schedule.serial_light, serial_heavy=schedule.serial_heavy,
+            serial_few=schedule.serial_few, near_lists=schedule.near_lists, tuning=self.tuning)
 
     def _bind(self):
         """Load this Simulation into its engine's fields unless it is the one they hold."""
@@ -494,6 +494,15 @@ class Simulation:
         return self._engine.projection
 
     # ---- introspection used by tests and tools ----
+    def debug_view(self):
+        """The engine's parts, bound to this Simulation, for tests and tools: engine,
+        state, params, motion, grid, contacts, projection (engine.py, docs/design.md).
+        Internals: names and fields may change between versions."""
+        self._check()
+        e = self._engine
+        return types.SimpleNamespace(engine=e, state=e.state, params=e.params, motion=e.motion,
+                                     grid=e.grid, contacts=e.contacts, projection=e.projection)
+
     def grid_overlaps(self) -> np.ndarray:
         """Rebuild the grid at the current state and list overlapping approaching pairs
         (K, 2) sorted — for comparing the grid with brute force."""

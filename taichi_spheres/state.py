@@ -71,7 +71,8 @@ class Features:
                          if self.walls else "none (fully periodic, compiled out)"),
             "periodic axes: " + (", ".join(a for a, w in zip(axes, self.wall_axes) if not w)
                                  or "none"),
-            "radii: " + ("equal (constant, no field)" if self.equal_radii else "per sphere"),
+            "radii: " + ("equal (one number, no per-sphere field)" if self.equal_radii
+                          else "per sphere"),
             "masses: " + ("equal (no mass field)" if self.equal_masses else "per sphere"),
             "pair restitution: " + ("1, elastic (compiled out)" if self.elastic else "inelastic"),
             "wall restitution: " + ("1, elastic (compiled out)" if self.elastic_walls

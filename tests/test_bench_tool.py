@@ -42,7 +42,7 @@ def _field_layout(sim) -> set:
     import taichi as ti
     from taichi_spheres.engine import field_parts
     out = set()
-    for part in field_parts(sim._engine):
+    for part in field_parts(sim.debug_view().engine):
         for name, value in vars(part).items():
             if isinstance(value, ti.Field):
                 out.add((type(part).__name__, name, _field_nbytes(value) //
@@ -67,7 +67,7 @@ def test_one_feature_compiled_in_changes_nothing_but_code(arch):
         assert extra == ({("SphereState", "radius", 8)} if key == "radii" else set()), key
         assert _field_layout(base) <= _field_layout(sim)
         if key == "radii":
-            assert _field_nbytes(sim._state.radius) == 8 * sim._engine.capacity
+            assert _field_nbytes(sim.debug_view().state.radius) == 8 * sim.debug_view().engine.capacity
 
 
 def test_rss_and_exponent():

@@ -204,6 +204,28 @@ def test_info_lists_compiled_features(tmp_path):
     assert "spheres: 4096" in r.stdout
     assert "gravity: off (compiled out)" in r.stdout
     assert "MiB" in r.stdout
+    # 4,096 spheres on the CPU: serial light loops, parallel detection from near lists
+    assert "schedule (cpu):" in r.stdout
+    assert "detection: parallel, from near lists" in r.stdout
+    assert "drift and grid build: serial" in r.stdout
+
+
+def test_schedule_follows_sphere_count_arch_and_options():
+    """engine.Schedule: which path a step takes, from the sphere count, the arch and the
+    Performance thresholds (no Taichi needed)."""
+    from taichi_spheres.config import DEFAULT
+    from taichi_spheres.engine import Schedule
+    perf = DEFAULT.performance
+    small = Schedule.plan(1000, True, False, True, perf)
+    assert small.serial_heavy and small.serial_light and small.fused and not small.serial_few
+    mid = Schedule.plan(50_000, True, True, True, perf)
+    assert mid.serial_light and not mid.serial_heavy and mid.serial_few and not mid.fused
+    gpu = Schedule.plan(1000, False, True, True, perf)
+    assert not (gpu.serial_light or gpu.serial_heavy or gpu.serial_few or gpu.fused)
+    assert "one parallel launch per colour" in " ".join(gpu.describe())
+    big = Schedule.plan(500_000, True, True, False, DEFAULT.with_(serial_light_below=10**6)
+                        .performance)
+    assert big.serial_light
 
 
 def test_cli_choices_match_the_runtime():

@@ -256,9 +256,9 @@ def test_parallel_colour_launches_give_the_serial_bits(arch, monkeypatch):
     for force, tuning in tunings.items():
         sim = ts.Simulation(scene, arch=arch, tuning=tuning)
         launches = []
-        per_colour = sim._contacts.resolve_colour_parallel
+        per_colour = sim.debug_view().contacts.resolve_colour_parallel
         # (restored at the end: the engine's kernels serve later Simulations)
-        monkeypatch.setattr(sim._contacts, "resolve_colour_parallel",
+        monkeypatch.setattr(sim.debug_view().contacts, "resolve_colour_parallel",
                             lambda k, launch=per_colour: (launches.append(k), launch(k)))
         sim.advance(25 * sim.max_step())
         runs.append((sim.state(), sim.stats))
@@ -295,9 +295,9 @@ def test_memory_estimate_matches_the_fields(arch, precision, kind):
     sim = ts.Simulation(scene, arch=arch, precision=precision)
     actual = sim.field_bytes()
     real = 8 if precision == "f64" else 4
-    engine = sim._engine      # may be an earlier Simulation's, with room for more
+    engine = sim.debug_view().engine      # may be an earlier Simulation's, with room for more
     assert engine.capacity >= scene.n and engine.cell_capacity >= sim.geometry.n_cells
-    assert ts.simulation._field_nbytes(sim._state.x) == 3 * real * engine.capacity
+    assert ts.simulation._field_nbytes(sim.debug_view().state.x) == 3 * real * engine.capacity
     assert actual > 2 * 3 * real * engine.capacity
     estimate = ts.simulation.field_bytes_for(engine.capacity, engine.cell_capacity,
                                              sim.features, engine.key.near_lists, precision)

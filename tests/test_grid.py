@@ -53,19 +53,20 @@ def test_grid_detection_matches_brute_force(arch, periodic, poly):
     sim = ts.Simulation(scene, arch=arch)
     # a long free flight creates many overlaps without resolving them
     h = (60 if poly else 20) * sim.max_step()
-    sim._params.h[None] = h
-    sim._motion.drift()
+    sim.debug_view().params.h[None] = h
+    sim.debug_view().motion.drift()
     pairs = sim.grid_overlaps()
     st = sim.state()
     ref = brute_force_overlaps(st, scene.box_lo, scene.box_hi, scene.periodic,
-                               sim._contacts.approach_eps, h)
+                               sim.debug_view().contacts.approach_eps, h)
     assert len(ref) > 10, "the set-up must produce overlaps to compare"
     np.testing.assert_array_equal(pairs, ref)
     # the production pass: every pair counted once, each for exactly one owner cell
-    sim._contacts.detect_all()
-    assert sim._params.remaining[None] == len(ref)
-    assert sim._contacts.active.to_numpy().sum() == len(ref)
-    assert sim._contacts.n_active[None] == np.count_nonzero(sim._contacts.active.to_numpy())
+    sim.debug_view().contacts.detect_all()
+    assert sim.debug_view().params.remaining[None] == len(ref)
+    assert sim.debug_view().contacts.active.to_numpy().sum() == len(ref)
+    contacts = sim.debug_view().contacts
+    assert contacts.n_active[None] == np.count_nonzero(contacts.active.to_numpy())
 
 
 @pytest.mark.parametrize("periodic,poly,prune", [(True, 0.0, True), ((True, False, True), 0.6, True),
@@ -84,13 +85,13 @@ def test_walks_around_touched_spheres_match_brute_force(arch, precision, periodi
     sim = ts.Simulation(scene, arch=arch, precision=precision,
                         tuning=DEFAULT.with_(prune_walks=prune))
     h = (60 if poly else 20) * sim.max_step()
-    sim._params.h[None] = h
-    sim._motion.drift()
-    sim._grid.build()
+    sim.debug_view().params.h[None] = h
+    sim.debug_view().motion.drift()
+    sim.debug_view().grid.build()
     moved = 0.9 * sim.geometry.slack
-    x = sim._state.positions() + moved * np.array([0.6, -0.48, 0.64])
-    sim._state.load(x, sim._state.velocities(), scene.radius, scene.mass)
-    c = sim._contacts
+    x = sim.debug_view().state.positions() + moved * np.array([0.6, -0.48, 0.64])
+    sim.debug_view().state.load(x, sim.debug_view().state.velocities(), scene.radius, scene.mass)
+    c = sim.debug_view().contacts
 
     @ti.kernel
     def walk_around_all() -> ti.i32:
@@ -171,10 +172,10 @@ def test_compiled_colour_loops_touch_each_sphere_once(arch, periodic):
     """On the compiled kernels: for every colour, each sphere lies in the block of at
     most one owner cell of that colour, and every sphere is in some block."""
     sim = ts.Simulation(gas(600, packing=0.3, periodic=periodic, gravity=(0, 0, 0)), arch=arch)
-    sim._grid.build()
+    sim.debug_view().grid.build()
     total = np.zeros(sim.n, dtype=np.int64)
-    for k in range(len(sim._contacts.colours)):
-        touches = sim._contacts.block_touches(k)
+    for k in range(len(sim.debug_view().contacts.colours)):
+        touches = sim.debug_view().contacts.block_touches(k)
         assert touches.max() <= 1, f"colour {k}: a sphere is in two blocks"
         total += touches
     assert total.min() >= 1
@@ -187,29 +188,30 @@ def test_grid_order_is_sorted_and_complete(arch, parallel):
     and a copy) give cells sorted by id, each sphere's slot, and its position in xs."""
     tuning = DEFAULT.with_(serial_light_below=0) if parallel else DEFAULT
     sim = ts.Simulation(gas(500, periodic=False, gravity=(0, 0, 0)), arch=arch, tuning=tuning)
-    assert sim._grid.serial_light == (sim.runtime.is_cpu and not parallel)
-    sim._grid.build()
+    assert sim.debug_view().grid.serial_light == (sim.runtime.is_cpu and not parallel)
+    sim.debug_view().grid.build()
     n = sim.n      # (the fields may have room for more spheres and cells)
-    start = sim._grid.start.to_numpy()[:sim._grid.m + 1]
-    order = sim._grid.order.to_numpy()[:n]
-    cell_of = sim._grid.cell_of.to_numpy()[:n]
+    start = sim.debug_view().grid.start.to_numpy()[:sim.debug_view().grid.m + 1]
+    order = sim.debug_view().grid.order.to_numpy()[:n]
+    cell_of = sim.debug_view().grid.cell_of.to_numpy()[:n]
     assert sorted(order.tolist()) == list(range(n))
-    for c in range(sim._grid.m):
+    for c in range(sim.debug_view().grid.m):
         ids = order[start[c]:start[c + 1]]
         assert np.all(np.diff(ids) > 0), "ids inside a cell must be sorted"
         assert np.all(cell_of[ids] == c)
-    np.testing.assert_array_equal(sim._grid.slot.to_numpy()[order], np.arange(n))
-    np.testing.assert_array_equal(sim._grid.xs.to_numpy()[:n], sim._state.x.to_numpy()[order])
+    np.testing.assert_array_equal(sim.debug_view().grid.slot.to_numpy()[order], np.arange(n))
+    view = sim.debug_view()
+    np.testing.assert_array_equal(view.grid.xs.to_numpy()[:n], view.state.x.to_numpy()[order])
 
 
 def test_scan_over_many_blocks(arch):
     """More cells than one scan block: the multi-level scan still gives exact starts."""
     scene = gas(3000, packing=0.05, periodic=True, gravity=(0, 0, 0))
     sim = ts.Simulation(scene, arch=arch)
-    assert sim._grid.m > 1024 and len(sim._grid.scan_sizes) >= 2
-    sim._grid.build()
-    start = sim._grid.start.to_numpy()[:sim._grid.m + 1]
-    counts = np.bincount(sim._grid.cell_of.to_numpy()[:sim.n], minlength=sim._grid.m)
+    assert sim.debug_view().grid.m > 1024 and len(sim.debug_view().grid.scan_sizes) >= 2
+    sim.debug_view().grid.build()
+    start = sim.debug_view().grid.start.to_numpy()[:sim.debug_view().grid.m + 1]
+    counts = np.bincount(sim.debug_view().grid.cell_of.to_numpy()[:sim.n], minlength=sim.debug_view().grid.m)
     np.testing.assert_array_equal(start, np.concatenate([[0], np.cumsum(counts)]))
 
 
@@ -312,11 +314,11 @@ def test_recorded_pairs_resolve_as_the_block_search(arch, precision):
     the order the forward scan met its spheres in, which is the block's order)."""
     scene = gas(3500, packing=0.4, seed=7)
     probe = ts.Simulation(scene, arch=arch, precision=precision)
-    probe._params.h[None] = probe.max_step()
-    probe._motion.drift()
-    probe._grid.build()
-    probe._contacts.detect_all()
-    assert np.count_nonzero(probe._contacts.active.to_numpy() == 2) > 10
+    probe.debug_view().params.h[None] = probe.max_step()
+    probe.debug_view().motion.drift()
+    probe.debug_view().grid.build()
+    probe.debug_view().contacts.detect_all()
+    assert np.count_nonzero(probe.debug_view().contacts.active.to_numpy() == 2) > 10
     runs = []
     for recorded in (2, 1):
         sim = ts.Simulation(scene, arch=arch, precision=precision,

@@ -65,9 +65,9 @@ def test_parallel_colour_launches_give_the_stored_digest(arch, monkeypatch):
     digest, sim = _digest("large", "f64",
                           tuning=DEFAULT.with_(few_pairs=-1, serial_resolve_pairs=-1))
     launches = []
-    per_colour = sim._contacts.resolve_colour_parallel
+    per_colour = sim.debug_view().contacts.resolve_colour_parallel
     # (restored at the end: the engine's kernels serve later Simulations)
-    monkeypatch.setattr(sim._contacts, "resolve_colour_parallel",
+    monkeypatch.setattr(sim.debug_view().contacts, "resolve_colour_parallel",
                         lambda k, launch=per_colour: (launches.append(k), launch(k)))
     sim.advance(sim.max_step())
     assert launches, "the sweeps did not launch per colour"

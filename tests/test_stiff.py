@@ -138,7 +138,7 @@ def test_fused_step_and_projection_near_sets_match_kernel_by_kernel(arch):
         tuning = DEFAULT.with_(projection_near_sets=name != "full scans")
         sim = ts.Simulation(_pour(120), arch=arch, fused=name == "fused", tuning=tuning)
         assert sim.fused == (name == "fused")
-        assert sim._projection.near_sets == (name != "full scans")
+        assert sim.debug_view().projection.near_sets == (name != "full scans")
         sim.advance(0.6)
         runs[name] = (sim.state(), sim.stats)
     a, stats = runs["kernels"]

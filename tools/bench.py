@@ -120,7 +120,8 @@ def staged_step(sim, h, times) -> int:
     Simulation.step, with ti.sync() after each stage; adds wall seconds per stage to
     ``times`` (keys STAGES) and returns the sweeps run. sim.stats is left alone; a
     re-binning inside the sweep loop counts as grid build and detection."""
-    motion, grid, contacts, params = sim._motion, sim._grid, sim._contacts, sim._params
+    view = sim.debug_view()
+    motion, grid, contacts, params = view.motion, view.grid, view.contacts, view.params
 
     def drift():
         params.h[None] = h
@@ -168,7 +169,7 @@ def _restore(sim, snapshot, vmax2):
     made at the same positions by the pass before it, fresher than a run ever has them,
     so staged passes and the full steps compared with them all detect by a full scan."""
     sim.set_state(snapshot.x, snapshot.v)
-    sim._contacts.near_ready = False
+    sim.debug_view().contacts.near_ready = False
     sim._vmax2 = vmax2
     ti.sync()
 

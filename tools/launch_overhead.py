@@ -8,7 +8,7 @@
   sweep kernels return);
 - atomics from a parallel loop onto a few counters: elements of one small 1-d field
   (they contend between threads) against separate 0-d fields (Taichi reduces those
-  per thread; what ``params.Slots`` uses).
+  per thread; what the step counters of ``params.StepParams`` are).
 
     python tools/launch_overhead.py [--arch cpu]
 """
