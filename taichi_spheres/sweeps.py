@@ -26,6 +26,7 @@ import math
 import os
 import sys
 import time
+import uuid
 
 import numpy as np
 
@@ -263,10 +264,11 @@ def _run_on_dask(spec, runs, duration, measure, options, client, workers, finish
     elif isinstance(client, str):
         client = own = distributed.Client(client)
     index, pending = {}, []
+    sweep_id = uuid.uuid4().hex[:8]   # keys of its own: later sweeps on the same client
     try:
         for k, params in enumerate(runs):
             fut = client.submit(run_one, spec, params, duration, measure, options,
-                                pure=False, key=f"taichi-spheres-run-{k}")
+                                pure=False, key=f"taichi-spheres-{sweep_id}-run-{k}")
             index[fut.key] = (k, params)
             pending.append(fut)
         for fut in distributed.as_completed(pending):

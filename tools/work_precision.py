@@ -47,6 +47,13 @@ restored to its t = 0 checkpoint and its ``sim_seconds`` reset to zero.
 
     python tools/work_precision.py            # ~ a few minutes on 2 CPU cores
     python tools/work_precision.py --quick    # ~ 1 minute
+    python tools/work_precision.py --workers 2                 # engine runs on Dask
+    python tools/work_precision.py --scheduler tcp://host:8786
+
+With ``--workers N`` (a local Dask cluster) or ``--scheduler ADDRESS`` the engine runs
+of each case (one per setting) go through ``ts.sweep``, in parallel, one Taichi thread
+each; each run is warmed up and timed in its worker as above. The references and the
+speed comparison run in this process.
 
 The plot docs/work_precision.png (needs the ``plot`` extra: ``pip install -e .[plot]``)
 is error against engine seconds, log-log, one colour per case, f64 solid, f32 dashed.
@@ -54,7 +61,9 @@ is error against engine seconds, log-log, one colour per case, f64 solid, f32 da
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
+import functools
 import math
 import os
 import sys
@@ -125,7 +134,15 @@ def bounce_apexes():
 
 # ---- engine runs ----
 def make_sim(scene, precision, fraction):
-    sim = ts.Simulation(scene, arch="cpu", precision=precision, step_fraction=fraction)
+    """A Simulation of ``scene`` with its kernels compiled, at t = 0 (warm_up)."""
+    return warm_up(ts.Simulation(scene, arch="cpu", precision=precision,
+                                 step_fraction=fraction))
+
+
+def warm_up(sim):
+    """Compile every kernel ``sim`` will need, then restore it to t = 0 with
+    ``sim_seconds`` reset, so that its timing excludes compilation. Returns sim."""
+    scene = sim.scene
     ckpt = sim.checkpoint()
     walls = not all(scene.periodic)
     # warm-up: compile every kernel the run will need (sweep kernels compile on the
@@ -139,6 +156,58 @@ def make_sim(scene, precision, fraction):
     sim.restore(ckpt)
     sim.sim_seconds = 0.0
     return sim
+
+
+class LocalRuns:
+    """The engine runs of a case here, one after another."""
+
+    def rows(self, scene, settings, measure) -> list[dict]:
+        """One row per (precision, step_fraction) of ``settings``: ``measure(sim)``
+        (a dict: seconds, error, extra) with the setting added."""
+        rows = []
+        for prec, f in settings:
+            sim = ts.Simulation(scene, arch="cpu", precision=prec, step_fraction=f)
+            rows.append(dict(precision=prec, fraction=f, **measure(sim)))
+        return rows
+
+
+def _in_row(measure, sim):
+    """measure(sim) under one key of a sweep's row (its own keys would mix with the
+    row's, "error" among them)."""
+    return {"result": measure(sim)}
+
+
+class DaskRuns:
+    """The engine runs of a case through ``ts.sweep`` on a Dask cluster (``client``:
+    a distributed.Client): one run per setting, one Taichi thread each, optimized
+    compile as here; each run is warmed up in its worker before it is timed."""
+
+    def __init__(self, client):
+        self.client = client
+
+    def rows(self, scene, settings, measure) -> list[dict]:
+        """As LocalRuns.rows; RuntimeError naming the setting of a run that failed."""
+        rows = []
+        for prec in dict.fromkeys(p for p, _ in settings):        # in order, f64 first
+            fractions = [f for p, f in settings if p == prec]
+            for row in ts.sweep(scene, {"precision": [prec], "step_fraction": fractions},
+                                0.0, measure=functools.partial(_in_row, measure),
+                                client=self.client, threads=1, compile="optimized"):
+                if row["error"] is not None:
+                    raise RuntimeError(f"{scene.name}, {prec}, step_fraction "
+                                       f"{row['step_fraction']:g}: {row['error']}")
+                rows.append(dict(precision=prec, fraction=row["step_fraction"],
+                                 **row["result"]))
+        return rows
+
+
+def engine_rows(case, runs, scene, settings, measure):
+    """Append the engine rows of ``settings`` (run by ``runs``) to case.rows, printing
+    each; returns case."""
+    for row in runs.rows(scene, settings, measure):
+        case.rows.append(row)
+        report(case, row)
+    return case
 
 
 def timed_reference(scene, t):
@@ -178,22 +247,17 @@ class Case:
         self.note = ""
 
 
-def trajectory_rows(case, scene, settings, T, xr, side, counter):
-    """Run the engine at each (precision, step_fraction) to time T; the error is
-    max |x - x_ref| / side; ``counter`` names the stat shown beside the pair count."""
+def trajectory_error(sim, T, xr, side, counter):
+    """Warm ``sim`` up and run it to time T [s]: the error is max |x - x_ref| / side;
+    ``counter`` names the stat shown beside the pair count."""
     label = {"steps": "steps", "wall_rests": "rests"}[counter]
-    for prec, f in settings:
-        sim = make_sim(scene, prec, f)
-        sim.advance_to(T)
-        err = float(np.abs(sim.state().x - xr).max() / side)
-        case.rows.append(dict(precision=prec, fraction=f, seconds=sim.sim_seconds, error=err,
-                              extra=f"pairs {sim.stats['pair_collisions']}, "
-                                    f"{label} {sim.stats[counter]}"))
-        report(case, case.rows[-1])
-    return case
+    warm_up(sim).advance_to(T)
+    err = float(np.abs(sim.state().x - xr).max() / side)
+    return dict(seconds=sim.sim_seconds, error=err,
+                extra=f"pairs {sim.stats['pair_collisions']}, {label} {sim.stats[counter]}")
 
 
-def run_traj(settings):
+def run_traj(settings, runs=LocalRuns()):
     case = Case("traj", "Trajectory, elastic gas N=64, walls, t = 2 s",
                 "max |x - x_ref| / box side")
     scene = scene_traj()
@@ -204,10 +268,11 @@ def run_traj(settings):
     case.note = f"reference: {ref.stats['pair_collisions']} pair, " \
                 f"{ref.stats['wall_collisions']} wall collisions; chaos check: a 1e-12 " \
                 f"perturbation of the start grows to {chaos_check(scene, T, side):.1e} by t = {T:g}"
-    return trajectory_rows(case, scene, settings, T, xr, side, "steps")
+    return engine_rows(case, runs, scene, settings, functools.partial(
+        trajectory_error, T=T, xr=xr, side=side, counter="steps"))
 
 
-def run_gravity(settings, rest_rule=True):
+def run_gravity(settings, runs=LocalRuns(), rest_rule=True):
     """rest_rule False: the same scene with rest_speed = 0 (the rest rule, supported
     contacts and the step cap that go with it switched off) to measure their effect."""
     name = "gravity" if rest_rule else "gravity-norest"
@@ -224,10 +289,23 @@ def run_gravity(settings, rest_rule=True):
     case.note = f"reference: {st['pair_collisions']} pair, {st['wall_collisions']} wall " \
                 f"collisions, {st['wall_rests']} wall rests; chaos check: a 1e-12 " \
                 f"perturbation of the start grows to {chaos_check(scene, T, side):.1e} by t = {T:g}"
-    return trajectory_rows(case, scene, settings, T, xr, side, "wall_rests")
+    return engine_rows(case, runs, scene, settings, functools.partial(
+        trajectory_error, T=T, xr=xr, side=side, counter="wall_rests"))
 
 
-def run_counts(settings, T):
+def count_errors(sim, T, n_ref, e0, xr, side):
+    """Warm ``sim`` up and run it to time T [s]: the larger of the pair-count error
+    against n_ref and the energy error against e0 [J]; x err against xr [m] beside."""
+    warm_up(sim).advance_to(T)
+    gravity = sim.scene.gravity
+    n_err = abs(sim.stats["pair_collisions"] - n_ref) / n_ref
+    e_err = abs(observe.total_energy(sim.state(), gravity) - e0) / e0
+    return dict(seconds=sim.sim_seconds, error=max(n_err, e_err),
+                extra=f"count {n_err:.2e}, energy {e_err:.2e}, x err "
+                      f"{np.abs(sim.state().x - xr).max() / side:.1e}")
+
+
+def run_counts(settings, T, runs=LocalRuns()):
     case = Case("counts", f"Collision count and energy, elastic gas N=64, walls, t = {T:g} s",
                 "max(|N - N_ref| / N_ref, |E - E0| / E0)")
     scene = scene_traj()
@@ -240,36 +318,29 @@ def run_counts(settings, T):
                 f"of the start grows to {chaos_check(scene, T, side):.1e} by t = {T:g}. " \
                 "The error column is the larger of the count and energy errors; 'x err' " \
                 "(max |x - x_ref| / box side) shows how far the trajectory has diverged"
-    for prec, f in settings:
-        sim = make_sim(scene, prec, f)
-        sim.advance_to(T)
-        n_err = abs(sim.stats["pair_collisions"] - n_ref) / n_ref
-        e_err = abs(observe.total_energy(sim.state(), scene.gravity) - e0) / e0
-        case.rows.append(dict(precision=prec, fraction=f, seconds=sim.sim_seconds,
-                              error=max(n_err, e_err),
-                              extra=f"count {n_err:.2e}, energy {e_err:.2e}, x err "
-                                    f"{np.abs(sim.state().x - xr).max() / side:.1e}"))
-        report(case, case.rows[-1])
-    return case
+    return engine_rows(case, runs, scene, settings, functools.partial(
+        count_errors, T=T, n_ref=n_ref, e0=e0, xr=xr, side=side))
 
 
-def run_bounce(settings):
+def apex_error(sim, apexes):
+    """Warm ``sim`` up and advance it to each apex time: max_k |z - z_apex,k| / h0."""
+    warm_up(sim)
+    err = 0.0
+    for t, z in apexes:
+        sim.advance_to(t)
+        err = max(err, abs(float(sim.state().x[0, 2]) - z) / BOUNCE_H0)
+    return dict(seconds=sim.sim_seconds, error=err, extra=f"steps {sim.stats['steps']}")
+
+
+def run_bounce(settings, runs=LocalRuns()):
     case = Case("bounce", f"Bounce apex heights, one ball, e_w = {BOUNCE_E}, "
                 f"{BOUNCE_K} bounces", "max_k |z - z_apex,k| / h0")
     scene = scene_bounce()
     apexes = bounce_apexes()
     case.ref_seconds = None
     case.note = "closed form, no reference run"
-    for prec, f in settings:
-        sim = make_sim(scene, prec, f)
-        err = 0.0
-        for t, z in apexes:
-            sim.advance_to(t)
-            err = max(err, abs(float(sim.state().x[0, 2]) - z) / BOUNCE_H0)
-        case.rows.append(dict(precision=prec, fraction=f, seconds=sim.sim_seconds, error=err,
-                              extra=f"steps {sim.stats['steps']}"))
-        report(case, case.rows[-1])
-    return case
+    return engine_rows(case, runs, scene, settings,
+                       functools.partial(apex_error, apexes=apexes))
 
 
 PRESSURE_N = 125
@@ -305,7 +376,22 @@ def carnahan_starling(scene, ke):
 NO_VIRIAL = "engine virial not available"
 
 
-def run_pressure(settings):
+def pressure_error(sim, T, p_ref):
+    """Warm ``sim`` up and run it to time T [s]: |P - p_ref| / p_ref of the virial
+    pressure [Pa] (NaN where the engine has no virial)."""
+    warm_up(sim)
+    w0 = sim.stats.get("virial", 0.0)
+    sim.advance_to(T)
+    stats = sim.stats
+    pairs = f"pairs {stats['pair_collisions']}"
+    if "virial" not in stats:
+        return dict(seconds=sim.sim_seconds, error=math.nan, extra=f"{NO_VIRIAL}; {pairs}")
+    p = virial_pressure(sim.scene, kinetic_energy(sim.state()), stats["virial"] - w0, T)
+    return dict(seconds=sim.sim_seconds, error=abs(p - p_ref) / p_ref,
+                extra=f"P {p:.6g} Pa, {pairs}")
+
+
+def run_pressure(settings, runs=LocalRuns()):
     T = PRESSURE_T
     case = Case("pressure", f"Virial pressure, periodic elastic gas N={PRESSURE_N}, "
                 f"packing {PRESSURE_PACKING:g}, t = {T:g} s", "|P - P_ref| / P_ref")
@@ -327,22 +413,8 @@ def run_pressure(settings):
                  f"from a lattice and lasts a few collision times); chaos check: a 1e-12 "
                  f"perturbation of the start changes P_ref by "
                  f"{abs(p_other - p_ref) / p_ref:.1e}")
-    for prec, f in settings:
-        sim = make_sim(scene, prec, f)
-        w0 = sim.stats.get("virial", 0.0)
-        sim.advance_to(T)
-        stats = sim.stats
-        pairs = f"pairs {stats['pair_collisions']}"
-        if "virial" not in stats:
-            row = dict(precision=prec, fraction=f, seconds=sim.sim_seconds,
-                       error=math.nan, extra=f"{NO_VIRIAL}; {pairs}")
-        else:
-            p = virial_pressure(scene, kinetic_energy(sim.state()), stats["virial"] - w0, T)
-            row = dict(precision=prec, fraction=f, seconds=sim.sim_seconds,
-                       error=abs(p - p_ref) / p_ref, extra=f"P {p:.6g} Pa, {pairs}")
-        case.rows.append(row)
-        report(case, row)
-    return case
+    return engine_rows(case, runs, scene, settings,
+                       functools.partial(pressure_error, T=T, p_ref=p_ref))
 
 
 # ---- reference vs engine speed ----
@@ -636,6 +708,51 @@ def write_plot(path, cases):
     return True
 
 
+@contextlib.contextmanager
+def engine_runs(workers, scheduler):
+    """LocalRuns, or DaskRuns on the scheduler at ``scheduler`` or on a LocalCluster of
+    ``workers`` processes (closed at the end)."""
+    if not workers and not scheduler:
+        yield LocalRuns()
+        return
+    from distributed import Client, LocalCluster
+    cluster = None if scheduler else LocalCluster(
+        n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+    client = Client(scheduler or cluster)
+    try:
+        print(f"engine runs on Dask: {scheduler or f'local cluster of {workers} workers'}",
+              flush=True)
+        yield DaskRuns(client)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def run_all(names, fractions, f32, counts_T, sizes, budget, runs):
+    """The cases ``names`` (f64 at ``fractions``, then f32 at ``f32``) with their engine
+    runs on ``runs``, and the speed rows of ``sizes`` (run here); (cases, speed)."""
+    runners = dict(traj=run_traj, gravity=run_gravity,
+                   **{"gravity-norest": lambda s, r: run_gravity(s, r, rest_rule=False)},
+                   counts=lambda s, r: run_counts(s, counts_T, r), bounce=run_bounce,
+                   pressure=run_pressure)
+    # all f64 runs first: switching precision re-initialises Taichi
+    cases = []
+    for name in names:
+        print(f"{name}:", flush=True)
+        cases.append(runners[name]([("f64", f) for f in fractions], runs))
+    speed = None
+    if sizes:
+        print("reference vs engine speed:", flush=True)
+        speed = run_speed(sizes, SPEED_T, budget)
+    if f32:
+        for name, c in zip(names, cases):
+            print(f"{name} (f32):", flush=True)
+            extra = runners[name]([("f32", f) for f in f32], runs)
+            c.rows += extra.rows
+    return cases, speed
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="fewer settings, shorter runs")
@@ -650,6 +767,13 @@ def main(argv=None):
                     help="wall seconds the reference may advance per speed gas [40; --quick 5]")
     ap.add_argument("--out", default=os.path.join(ROOT, "docs", "work_precision.md"))
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--workers", type=int, default=0,
+                    help="run the engine runs of each case through ts.sweep on a local Dask "
+                         "cluster of this many worker processes (one Taichi thread each); "
+                         "0: here, one after another [0]")
+    ap.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="run the engine runs on the Dask scheduler at ADDRESS "
+                         "(tcp://host:8786) instead")
     args = ap.parse_args(argv)
     fractions = tuple(args.fractions or (QUICK_FRACTIONS if args.quick else FRACTIONS))
     f32 = () if args.no_f32 else ((F32_FRACTIONS[:1]) if args.quick else F32_FRACTIONS)
@@ -660,24 +784,8 @@ def main(argv=None):
     sizes = args.speed_sizes if args.speed_sizes is not None else \
         (SPEED_SIZES[:2] if args.quick else SPEED_SIZES)
     budget = args.speed_budget or (5.0 if args.quick else 40.0)
-    runners = dict(traj=run_traj, gravity=run_gravity,
-                   **{"gravity-norest": lambda s: run_gravity(s, rest_rule=False)},
-                   counts=lambda s: run_counts(s, counts_T), bounce=run_bounce,
-                   pressure=run_pressure)
-    # all f64 runs first: switching precision re-initialises Taichi
-    cases = []
-    for name in args.cases:
-        print(f"{name}:", flush=True)
-        cases.append(runners[name]([("f64", f) for f in fractions]))
-    speed = None
-    if sizes:
-        print("reference vs engine speed:", flush=True)
-        speed = run_speed(sizes, SPEED_T, budget)
-    if f32:
-        for name, c in zip(args.cases, cases):
-            print(f"{name} (f32):", flush=True)
-            extra = runners[name]([("f32", f) for f in f32])
-            c.rows += extra.rows
+    with engine_runs(args.workers, args.scheduler) as runs:
+        cases, speed = run_all(args.cases, fractions, f32, counts_T, sizes, budget, runs)
     elapsed = time.perf_counter() - t_start
     print(f"total {elapsed:.1f} s")
     for c in cases:
