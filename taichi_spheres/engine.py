@@ -32,7 +32,7 @@ from .projection import Projection
 from .state import Features, SphereState
 from .walls import Motion
 
-__all__ = ["EngineKey", "Engine", "acquire", "capacity_for"]
+__all__ = ["Schedule", "EngineKey", "Engine", "acquire", "capacity_for"]
 
 
 @dataclasses.dataclass(frozen=True)
