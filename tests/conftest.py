@@ -30,7 +30,15 @@ def pytest_configure(config):
         os.environ.setdefault(COMPILE_ENV, "fast")
 
 
+def _runs_f32(item) -> bool:
+    callspec = getattr(item, "callspec", None)
+    return callspec is not None and callspec.params.get("precision") == "f32"
+
+
 def pytest_collection_modifyitems(config, items):
+    # f64 tests first, then f32: Taichi has one precision per process, so each switch
+    # re-initialises it and drops every compiled engine (taichi_spheres/engine.py)
+    items.sort(key=_runs_f32)
     if config.getoption("--slow"):
         return
     skip = pytest.mark.skip(reason="slow validation run: use --slow")
