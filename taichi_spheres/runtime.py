@@ -7,7 +7,9 @@ run (``RuntimeError``) instead of crashing inside a kernel.
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
 import os
 
 import numpy as np
@@ -105,7 +107,8 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
     kwargs.update(COMPILE_MODES[mode])
     if threads is not None:
         kwargs["cpu_max_num_threads"] = threads
-    ti.init(**kwargs)
+    with contextlib.redirect_stdout(io.StringIO()):
+        ti.init(**kwargs)    # (its "[Taichi] Starting on arch=..." line: Runtime.actual says it)
     actual = ti.lang.impl.current_cfg().arch.name
     if arch != "cpu" and actual in ("x64", "arm64"):
         ti.reset()
