@@ -47,7 +47,7 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture
 def arch(request):
     return request.config.getoption("--arch")
 

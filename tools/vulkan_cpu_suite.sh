@@ -18,7 +18,18 @@
 set -u
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-.venv/bin/python}
-DIST=http://deb.debian.org/debian
+# the Debian mirror this machine's apt uses (deb822 .sources or one-line lists;
+# DEBIAN_MIRROR overrides it)
+apt_mirror() {
+    local uri
+    uri=$(grep -hE '^URIs:' /etc/apt/sources.list.d/*.sources 2>/dev/null \
+        | awk '{print $2}' | grep -v security | head -1)
+    [ -n "$uri" ] || uri=$(grep -hE '^deb ' /etc/apt/sources.list /etc/apt/sources.list.d/*.list \
+        2>/dev/null | awk '{print $2}' | grep -v security | head -1)
+    echo "${uri%/}"
+}
+DIST=${DEBIAN_MIRROR:-$(apt_mirror)}
+[ -n "$DIST" ] || { echo "no Debian mirror in the apt configuration: set DEBIAN_MIRROR" >&2; exit 1; }
 SUITE=bookworm-backports
 CACHE=.cache/mesa25
 LIB=$CACHE/root/usr/lib/x86_64-linux-gnu
