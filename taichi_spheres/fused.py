@@ -4,12 +4,24 @@ No ``from __future__ import annotations`` here: Taichi reads kernel argument
 annotations as objects.
 """
 
+import typing
+
 import taichi as ti
 
 from .contacts import Contacts
 from .grid import Grid
 from .projection import Projection
 from .walls import Motion
+
+
+class FusedOutcome(typing.NamedTuple):
+    """What a fused step did: the sweeps it ran; ``rebuild``: it stopped because a
+    sphere moved farther than the grid's slack (go on kernel by kernel after a
+    rebuild); ``project``: the overlap projection is due."""
+
+    sweeps: int
+    rebuild: bool
+    project: bool
 
 
 class FusedStep:
@@ -22,10 +34,10 @@ class FusedStep:
     ``step(h, max_sweeps)``: drift and walls, grid build, detection, detect/resolve
     sweeps until no approaching overlap is left or ``max_sweeps``, or until a sphere
     moved farther than the grid's slack (the grid must be rebuilt: the caller goes on
-    kernel by kernel, a rare case); returns 4 x sweeps + 2 x (stopped for a rebuild) +
-    1 if the overlap projection is due (overlap above ``tolerance`` after a step that
-    hit the sweep limit, or in a scene with resting contact: ``supports``), as
-    :meth:`Simulation.step` decides it. ``project()``: the projection's iterations;
+    kernel by kernel, a rare case); returns a FusedOutcome: the sweeps, whether it
+    stopped for a rebuild, and whether the overlap projection is due (overlap above
+    ``tolerance`` after a step that hit the sweep limit, or in a scene with resting
+    contact: ``supports``), as :meth:`Simulation.step` decides it. ``project()``: the projection's iterations;
     sets params.projected = 1, params.projected_pairs and params.proj_worst. The same
     functions in the same order as the step launched kernel by kernel, so the same
     bits. Each function body appears once per kernel, and drift, grid build and
@@ -74,5 +86,12 @@ class FusedStep:
 
         # the tolerance goes in as an f64 argument: compared exactly as the Python step
         # compares its float copies, in f32 builds too
-        self.step = lambda h, max_sweeps: step(h, max_sweeps, tolerance)
+        self._step = step
+        self._tolerance = tolerance
         self.project = lambda: project(tolerance)
+
+    def step(self, h: float, max_sweeps: int) -> FusedOutcome:
+        """One fused step of length h [s] with at most max_sweeps sweeps (the kernel
+        returns 4 x sweeps + 2 x rebuild + project in one i32: one launch)."""
+        status = self._step(h, max_sweeps, self._tolerance)
+        return FusedOutcome(status >> 2, bool(status & 2), bool(status & 1))

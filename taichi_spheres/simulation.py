@@ -375,12 +375,12 @@ class Simulation:
         sweeps = 0
         remaining = None
         if self._fused is not None:
-            status = self._fused.step(h, self.max_sweeps)
-            sweeps = status >> 2
-            if status & 2:
+            outcome = self._fused.step(h, self.max_sweeps)
+            sweeps = outcome.sweeps
+            if outcome.rebuild:
                 # a sphere moved farther than the grid's margin: go on kernel by kernel
                 remaining = self._rebuild()
-            elif status & 1:
+            elif outcome.project:
                 self._fused.project()
         else:
             self._params.h[None] = h
@@ -389,9 +389,10 @@ class Simulation:
             remaining = self._detect()
         if remaining is not None:
             while remaining > 0 and sweeps < self.max_sweeps:
-                remaining, far = decode_status(self._contacts.sweep(remaining))
+                found = decode_status(self._contacts.sweep(remaining))
+                remaining = found.remaining
                 sweeps += 1
-                if far:
+                if found.rebuild:
                     remaining = self._rebuild()
         return sweeps
 
@@ -433,7 +434,7 @@ class Simulation:
         cover); returns the approaching overlaps found."""
         status, from_list = self._contacts.detect()
         self._totals["near_list_detections"] += int(from_list)
-        return decode_status(status)[0]
+        return decode_status(status).remaining
 
     def _project(self) -> float:
         """Push apart pairs overlapping beyond the tolerance (projection.py); returns

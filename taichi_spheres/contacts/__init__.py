@@ -11,6 +11,8 @@ only those pairs, plus every neighbour of the spheres that moved more than half 
 spare reach since (they are scanned around in the grid), until too many have.
 """
 
+import typing
+
 import numpy as np
 import taichi as ti
 
@@ -24,13 +26,22 @@ from .near import NearLists, near_allowance
 from .pair import PairRule
 from .sweeps import MAX_COLOURS, ColourSweeps
 
-__all__ = ["Contacts", "near_allowance", "decode_status", "MAX_COLOURS"]
+__all__ = ["Contacts", "Status", "near_allowance", "decode_status", "MAX_COLOURS"]
 
 
-def decode_status(status: int):
-    """(remaining approaching overlaps, grid must be rebuilt) from a detection status
-    (:meth:`Contacts.status`, returned by ``detect_all`` and ``sweep``)."""
-    return status >> 1, bool(status & 1)
+class Status(typing.NamedTuple):
+    """What a detection found: ``remaining`` approaching overlaps, and whether a sphere
+    moved farther than the grid's slack (``rebuild``: the grid must be built again)."""
+
+    remaining: int
+    rebuild: bool
+
+
+def decode_status(status: int) -> Status:
+    """The Status a detection kernel returned packed in one i32 (2 x remaining +
+    rebuild: one launch returns both; :meth:`Contacts.status`, ``detect_all``,
+    ``sweep``)."""
+    return Status(status >> 1, bool(status & 1))
 
 
 @ti.data_oriented
