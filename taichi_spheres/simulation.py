@@ -171,7 +171,6 @@ class Simulation:
                                        self.geometry.n_cells)
         self._parked = (scene.x, scene.v)
         self._bind()
-        self._overlap_tolerance = self.tuning.physics.overlap_tolerance
         # small CPU systems can run each step in one or two serial kernels (fused.py)
         self._fused = self._engine.fused_step() if self.schedule.fused else None
         self._r_min = float(scene.radius.min())
@@ -205,7 +204,7 @@ class Simulation:
     def overlap_tolerance(self) -> float:
         """Relative overlap above which the projection pushes pairs apart (fixed when the
         kernels are built: config.Rules.overlap_tolerance)."""
-        return self._overlap_tolerance
+        return self.tuning.physics.overlap_tolerance
 
     def field_bytes(self) -> int:
         """Bytes of the Taichi fields this Simulation runs on [bytes], from their shapes

@@ -79,6 +79,7 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
         # only worth a second compiled variant where the loops are otherwise parallel
         self.serial_few = serial_few and not serial_heavy
         eps = float(np.finfo(np.float64 if self.real == ti.f64 else np.float32).eps)
+        self.eps = eps              # machine epsilon of the precision
         self.approach_eps = 8.0 * eps
         self.near_lists = near_lists
         self._allocate_fields(grid.cell_capacity, state.capacity)
@@ -205,10 +206,9 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
         self.half_m0[None] = 0.5 * float(scene.mass[0])
         # round-off allowance of the cells a walk skips (examine_around) [m]: positions
         # and cell faces carry a few eps of the largest coordinate
-        eps = self.approach_eps / 8.0
         extent = max(max(abs(a), abs(b)) for a, b in zip(scene.box_lo, scene.box_hi))
         r_max = float(scene.radius.max())
-        self.walk_reach[None] = r_max + 64.0 * eps * (extent + max(geom.cell))
+        self.walk_reach[None] = r_max + 64.0 * self.eps * (extent + max(geom.cell))
         self.near_reach, allowance = near_allowance(geom, r_max, self.perf.near_safety)
         if self.near_lists:
             if not allowance > 0:
