@@ -31,13 +31,19 @@ def scene_digest(scene) -> str:
 def save(path, sim, scene, frame, fps) -> None:
     """Write the checkpoint atomically (temporary file, then rename)."""
     ck = sim.checkpoint()
-    meta = dict(time=ck["time"], vmax2=ck["vmax2"], resting=ck["resting"], totals=ck["totals"],
+    meta = dict(time=ck["time"], vmax2=ck["vmax2"], totals=ck["totals"],
                 last_step=ck["last_step"], n=ck["n"], precision=ck["precision"],
                 step_fraction=ck["step_fraction"], max_sweeps=ck["max_sweeps"],
                 frame=int(frame), fps=float(fps), scene=scene_digest(scene))
+    arrays = dict(x=ck["x"], v=ck["v"])
+    if ck.get("warm") is not None:
+        # the contact solver's warm start: the next steps give the same bits
+        meta["warm_h_prev"] = ck["warm"]["h_prev"]
+        arrays.update(warm_key=ck["warm"]["key"], warm_lam=ck["warm"]["lam"],
+                      warm_kept=ck["warm"]["kept"], warm_loaded=ck["warm"]["loaded"])
     tmp = path + ".tmp.npz"
     with hold_interrupts():
-        np.savez(tmp, x=ck["x"], v=ck["v"], meta=np.array(json.dumps(meta)))
+        np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays)
         os.replace(tmp, path)
 
 
@@ -47,13 +53,18 @@ def load(path, sim, scene, fps) -> int:
         with np.load(path) as data:
             meta = json.loads(str(data["meta"]))
             x, v = data["x"], data["v"]
+            warm = None
+            if "warm_key" in data:
+                warm = dict(key=data["warm_key"], lam=data["warm_lam"],
+                            kept=data["warm_kept"], loaded=data["warm_loaded"],
+                            h_prev=meta["warm_h_prev"])
     except (OSError, KeyError, ValueError) as exc:
         raise ValueError(f"cannot read checkpoint {path}: {exc}") from None
     if meta["scene"] != scene_digest(scene):
         raise ValueError(f"checkpoint {path} was made from a different scene")
     if meta["fps"] != float(fps):
         raise ValueError(f"checkpoint {path} was made at {meta['fps']:g} fps, not {fps:g}")
-    sim.restore(dict(meta, x=x, v=v))
+    sim.restore(dict(meta, x=x, v=v, warm=warm))
     return int(meta["frame"])
 
 

@@ -2,7 +2,8 @@
 
 ``Tuning(physics=Rules(...), performance=Performance(...))``, passed as
 ``Simulation(scene, tuning=...)`` (default: ``Tuning()``). The *physics rules* change
-results (rest and collapse rules, overlap projection, wall bounces); the *performance*
+results (impact threshold, contact solver tolerances, collapse rule, wall bounces);
+the *performance*
 knobs change only speed and memory (loop variants, list sizes, grid shape): the same
 bits whatever their values (tests run both sides of each). Kernels compile the values
 in (``ti.static``), so Simulations with other values run on another engine
@@ -18,33 +19,46 @@ __all__ = ["Rules", "Performance", "Tuning", "DEFAULT"]
 
 @dataclasses.dataclass(frozen=True)
 class Rules:
-    """Physics rules of resting contact and inelastic collapse (docs/resting.md).
+    """Physics rules: impacts, persistent contacts, inelastic collapse (docs/design.md).
 
-    rest_speed_factor: automatic rest speed under gravity, in units of sqrt(2 g D) with
-        D = step_fraction x smallest radius (the largest speed gravity adds to a pair in
-        one step); bounces slower than the rest speed are perfectly inelastic.
-    rest_tolerance: approaches of a resting contact slower than this fraction of the
-        rest speed are not collided (repeated e = 0 collisions in a resting pile shrink
-        the residual approach geometrically and would otherwise go on to round-off).
-    support_cos: cosine of the widest angle from vertical at which a slow contact counts
-        as resting on a support (about 66 degrees: a sphere in the groove of two
-        touching spheres, at 60 degrees, still does).
+    impact_factor: with gravity, an approach faster than impact_factor x sqrt(2 |g| D)
+        (D = step_fraction x smallest radius: sqrt(2 g D) = g h is the speed gravity
+        adds in the longest step a resting scene takes, h = sqrt(2 D / g)) is an
+        impact, resolved by the exact rewind with restitution; a slower one at a
+        touching or nearly touching pair (or wall) is a persistent contact, a row of
+        the contact solver (contacts/solver.py). A scene's ``rest_speed`` raises that
+        threshold.
+    contact_tolerance: the contact solver iterates until no row changes a velocity by
+        more than this fraction of the impact speed.
+    contact_iterations: velocity sweeps of the contact solver per step at most.
+    warm_start: start each step's impulses from the same rows' last impulses (False:
+        from zero; for measuring what warm starting saves).
+    position_iterations: pseudo-velocity (split impulse) sweeps per step at most.
+    relaxation: over-relaxation factor omega of the Gauss-Seidel updates (1: plain
+        projected Gauss-Seidel; 1 < omega < 2 converges faster on stacks).
+    overlap_tolerance: relative overlap the split impulse aims below (a tenth of it
+        of the smallest diameter per sweep), and above which the projection pushes
+        apart the overlaps left when a step without a contact solver hit the sweep
+        limit.
     collapse_hits: from a sphere's collapse_hits-th collision in one step on, its
-        collisions are perfectly inelastic in the normal direction (inelastic pairs
-        only; a time-stepped stand-in for the TC model of Luding & McNamara 1998).
+        impacts are perfectly inelastic in the normal direction (inelastic pairs only;
+        a time-stepped stand-in for the TC model of Luding & McNamara 1998, needed
+        for inelastic collapse in a cooling gas, where no contact solver runs).
     max_wall_bounces: bounces of one sphere on one wall within a step before it is put
         to rest on the wall.
-    overlap_tolerance: relative overlap above which the projection pushes pairs apart.
     projection_iterations: Jacobi iterations of the projection per step at most.
     projection_relaxation: fraction of every pair's overlap one iteration removes.
     """
 
-    rest_speed_factor: float = 2.0
-    rest_tolerance: float = 0.03
-    support_cos: float = 0.4
+    impact_factor: float = 2.0
+    contact_tolerance: float = 1e-6
+    contact_iterations: int = 100
+    warm_start: bool = True
+    relaxation: float = 1.0
+    position_iterations: int = 100
+    overlap_tolerance: float = 1e-4
     collapse_hits: int = 4
     max_wall_bounces: int = 8
-    overlap_tolerance: float = 1e-4
     projection_iterations: int = 8
     projection_relaxation: float = 0.5
 
@@ -79,6 +93,12 @@ class Performance:
     max_cells_per_sphere: at most about this many grid cells per sphere.
     wide_margin: cells aim at the largest diameter plus this many times the largest
         move per step.
+    serial_solver_below: below this many spheres the CPU runs the contact solver's
+        sweeps serially in one launch (same bits as one launch per colour).
+    contacts_per_sphere: contact rows the solver has room for, per sphere (a pair
+        counts once; a dense pack of equal spheres has about 3 plus walls).
+    warm_slots: warm-start impulses kept per sphere (for the rows where it is the
+        lower id; a sphere with more keeps none).
     """
 
     serial_light_below: int = 200_000
@@ -97,6 +117,9 @@ class Performance:
     scan_block: int = 1024
     max_cells_per_sphere: float = 8.0
     wide_margin: float = 4.0
+    serial_solver_below: int = 30_000
+    contacts_per_sphere: int = 8
+    warm_slots: int = 16
 
 
 @dataclasses.dataclass(frozen=True)

@@ -25,6 +25,7 @@ import weakref
 
 from .config import Performance, Tuning
 from .contacts import Contacts
+from .contacts.solver import ContactSolver
 from .fused import FusedStep
 from .grid import Grid, GridGeometry
 from .params import StepParams
@@ -102,7 +103,8 @@ class Engine:
     """Fields and kernels for up to ``capacity`` spheres and ``cell_capacity`` cells.
 
     Parts: state (SphereState), params (StepParams), motion (Motion), grid (Grid),
-    contacts (Contacts), projection (Projection), and the fused step
+    contacts (Contacts), projection (Projection), solver (contacts.solver.ContactSolver,
+    only with Features.contacts), and the fused step
     (:meth:`fused_step`, built on first use)."""
 
     def __init__(self, key: EngineKey, capacity: int, cell_capacity: int):
@@ -122,6 +124,10 @@ class Engine:
                                  serial_few=key.serial_few, near_lists=key.near_lists, tuning=t)
         self.projection = Projection(self.state, self.grid, self.contacts, self.motion, f,
                                      key.serial_light, t)
+        self.solver = ContactSolver(self.state, self.grid, self.params, self.contacts, f,
+                                    key.serial_heavy, t,
+                                    cpu=key.serial_heavy or key.serial_few) \
+            if f.contacts else None
         self._fused = None
         self._occupant = None      # weakref to the Simulation bound last
 
@@ -132,17 +138,18 @@ class Engine:
         """The fused step over this engine's parts (compiled on its first launch)."""
         if self._fused is None:
             self._fused = FusedStep(self.motion, self.grid, self.contacts, self.projection,
-                                    self.key.real, self.key.features.supports,
+                                    self.key.real, self.key.features.contacts,
                                     self.projection.tolerance)
         return self._fused
 
     def bound_to(self, sim) -> bool:
         return self._occupant is not None and self._occupant() is sim
 
-    def bind(self, sim, x, v, geom: GridGeometry, rest_speed: float) -> None:
+    def bind(self, sim, x, v, geom: GridGeometry, rest_speed: float, warm=None) -> None:
         """Make ``sim`` the Simulation these fields hold: park the previous one's
-        positions and velocities on the host (its ``_park``), then load ``sim``'s scene,
-        x, v [(n, 3)], grid geometry and rest speed [m/s]."""
+        positions, velocities and contact impulses on the host (its ``_park``), then
+        load ``sim``'s scene, x, v [(n, 3)], grid geometry, rest speed [m/s] and the
+        contact solver's warm start (``warm``: ContactSolver.warm_rows, or None)."""
         previous = self._occupant() if self._occupant is not None else None
         if previous is not None and previous is not sim:
             previous._park()
@@ -151,6 +158,10 @@ class Engine:
         self.params.bind(scene, rest_speed)
         self.grid.bind(geom)
         self.contacts.bind(scene, geom)
+        if self.solver is not None:
+            self.solver.bind(scene, geom)
+            if warm is not None:
+                self.solver.load_warm(warm)
         self._occupant = weakref.ref(sim)
 
 
@@ -194,5 +205,6 @@ def acquire(key: EngineKey, n: int, n_cells: int) -> Engine:
 
 def field_parts(engine: Engine) -> tuple:
     """The objects whose attributes hold an engine's Taichi fields."""
-    return (engine.state, engine.params, engine.motion, engine.grid, engine.contacts,
-            engine.projection)
+    parts = (engine.state, engine.params, engine.motion, engine.grid, engine.contacts,
+             engine.projection)
+    return parts + ((engine.solver,) if engine.solver is not None else ())

@@ -36,8 +36,8 @@ class FusedStep:
     moved farther than the grid's slack (the grid must be rebuilt: the caller goes on
     kernel by kernel, a rare case); returns a FusedOutcome: the sweeps, whether it
     stopped for a rebuild, and whether the overlap projection is due (overlap above
-    ``tolerance`` after a step that hit the sweep limit, or in a scene with resting
-    contact: ``supports``), as :meth:`Simulation.step` decides it. ``project()``: the projection's iterations;
+    ``tolerance`` after a step that hit the sweep limit, without a contact solver:
+    ``solver_on`` False), as :meth:`Simulation.step` decides it. ``project()``: the projection's iterations;
     sets params.projected = 1, params.projected_pairs and params.proj_worst. The same
     functions in the same order as the step launched kernel by kernel, so the same
     bits. Each function body appears once per kernel, and drift, grid build and
@@ -47,7 +47,7 @@ class FusedStep:
     compiled 3-10x slower)."""
 
     def __init__(self, motion: Motion, grid: Grid, contacts: Contacts,
-                 projection: Projection, real, supports: bool, tolerance: float):
+                 projection: Projection, real, solver_on: bool, tolerance: float):
         params = contacts.params
 
         @ti.kernel
@@ -64,7 +64,7 @@ class FusedStep:
             due = 0
             # compared in f64, as the Python step compares its float copies (same bits)
             if ti.cast(overlap, ti.f64) > tol and \
-                    (params.remaining[None] > 0 or ti.static(supports)):
+                    params.remaining[None] > 0 and ti.static(not solver_on):
                 due = 1
             return 4 * sweeps + 2 * far + due
 

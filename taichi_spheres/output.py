@@ -14,8 +14,9 @@ __all__ = ["VideoWriter", "DiagnosticsWriter", "CSV_COLUMNS", "check_writable"]
 CSV_COLUMNS = ["frame", "time", "kinetic", "potential", "total", "px", "py", "pz",
                "steps", "pair_collisions", "wall_collisions", "wall_rests", "sweeps",
                "max_overlap", "unresolved", "dt", "sweep_limit_hits",
-               "multi_collision_spheres", "rest_collisions", "energy_pair_restitution",
-               "energy_wall_restitution", "energy_rest_rule", "projected_pairs"]
+               "multi_collision_spheres", "collapse_collisions", "energy_pair_restitution",
+               "energy_wall_restitution", "energy_collapse", "energy_contacts",
+               "projected_pairs", "contacts", "contact_iterations"]
 #: CSV columns copied from Simulation.stats as they are
 _STATS_COLUMNS = CSV_COLUMNS[8:]
 

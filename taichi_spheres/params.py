@@ -14,28 +14,31 @@ import numpy as np
 import taichi as ti
 
 #: i32 counters of one step: approaching overlaps left by the last detection; pair and
-#: wall collisions; wall rest clamps (spheres put on a wall); spheres with more than
-#: one collision; pair collisions made perfectly inelastic by the rest or collapse
-#: rule, of which against a supported sphere; spheres supported by the floor; of a
-#: fused step (fused.py) also: 1 if it ran the overlap projection, and the pairs the
-#: projection pushed; wall impacts made perfectly inelastic by the rest rule.
+#: wall collisions (impacts); wall rest clamps (spheres put on a wall); spheres with
+#: more than one collision; pair collisions made perfectly inelastic by the collapse
+#: rule; of a fused step (fused.py) also: 1 if it ran the overlap projection, and the
+#: pairs the projection pushed; of the contact solver (contacts/solver.py): its rows,
+#: velocity sweeps and position sweeps.
 COUNTS = ("remaining", "pair_collisions", "wall_collisions", "wall_rests",
-          "multi_collision_spheres", "rest_collisions", "supported_collisions", "on_floor",
-          "projected", "projected_pairs", "wall_rest_collisions")
+          "multi_collision_spheres", "collapse_collisions", "projected", "projected_pairs",
+          "contacts", "contact_iterations", "position_iterations")
 #: real values of one step: max relative overlap of separating pairs, of approaching
 #: pairs in the last detection; max |v|^2 [m^2/s^2]; max distance moved since the grid
-#: was built [m]; kinetic energy removed by pair restitution, wall restitution and the
-#: rest rule [J]; collisional virial sum r_ij . dp_i [J s]; of a fused step that
-#: projected: the largest relative overlap its last projection iteration measured.
+#: was built [m]; energy removed by pair restitution, wall restitution, the collapse
+#: rule and the contact solver [J]; collisional virial sum r_ij . dp_i [J s]; of a
+#: fused step that projected: the largest relative overlap its last projection
+#: iteration measured; of the contact solver: the residual of its last velocity sweep
+#: [m/s] and the largest relative overlap of its rows after the solve.
 VALUES = ("sep_overlap", "open_overlap", "vmax2", "moved", "energy_pair_restitution",
-          "energy_wall_restitution", "energy_rest_rule", "virial", "proj_worst")
+          "energy_wall_restitution", "energy_collapse", "energy_contacts", "virial",
+          "proj_worst", "contact_residual", "contact_overlap")
 
 
 @ti.data_oriented
 class StepParams:
     """h [s]; gravity [m/s^2]; box lo/hi/size [m]; restitution e, e_wall; rest_speed
-    [m/s]: pair approach speed below which e = 0 (0: rule off); up: unit vector against
-    gravity (zero without gravity); and the step's counters, one 0-d field per name of
+    [m/s]: the scene's floor of the impact speed (contacts/solver.py; 0: none); up:
+    unit vector against gravity (zero without gravity); and the step's counters, one 0-d field per name of
     COUNTS (i32) and VALUES (real): ``params.pair_collisions[None]``."""
 
     def __init__(self, real):

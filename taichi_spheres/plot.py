@@ -20,11 +20,12 @@ __all__ = ["read_diagnostics", "collision_rate", "plot_diagnostics", "PlotUnavai
 #: CSV columns the plots read (output.CSV_COLUMNS has them all)
 REQUIRED_COLUMNS = ("time", "kinetic", "potential", "total", "pair_collisions",
                     "wall_collisions", "max_overlap", "energy_pair_restitution",
-                    "energy_wall_restitution", "energy_rest_rule")
+                    "energy_wall_restitution", "energy_collapse", "energy_contacts")
 #: the energy losses drawn, by CSV column and legend label
 LOSSES = (("energy_pair_restitution", "lost: pair restitution"),
           ("energy_wall_restitution", "lost: wall restitution"),
-          ("energy_rest_rule", "lost: rest rule"))
+          ("energy_collapse", "lost: collapse rule"),
+          ("energy_contacts", "lost: contacts"))
 #: collision rates are averaged over at most this many intervals of equal frame count
 RATE_POINTS = 200
 #: figure size [inches] and resolution [dots per inch]

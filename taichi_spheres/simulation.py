@@ -6,8 +6,11 @@ One step of length h (docs/design.md, "One step, in parallel"):
   3. detect overlapping approaching pairs in parallel (contacts.py);
   4. sweep: resolve them colour by colour, rewinding each pair to contact; repeat
      detection around the spheres that changed until none is left or
-     ``max_sweeps`` is reached; what is left is counted in ``stats['unresolved']``.
-  5. adaptive h: no sphere moves more than ``step_fraction`` x the smallest radius
+     ``max_sweeps`` is reached; what is left is counted in ``stats['unresolved']``;
+  5. with the contact solver (inelastic pairs under gravity): solve the persistent
+     contacts, the pairs and walls touching or nearly touching that approach slower
+     than the impact speed (contacts/solver.py);
+  6. adaptive h: no sphere moves more than ``step_fraction`` x the smallest radius
      in one step (including the g h^2/2 of gravity), and steps end exactly on the
      times asked for.
 """
@@ -24,14 +27,14 @@ from taichi.lang.util import to_numpy_type
 from . import engine as engines
 from . import runtime
 from .config import DEFAULT, Performance, Tuning
-from .contacts import decode_status, near_allowance
+from .contacts import near_allowance
 from .grid import GridGeometry
-from . import observe
+from . import observe, stepping
 from .scene import Scene
 from .state import Features, State
 
 __all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS", "rest_speed_for",
-           "REST_SPEED_FACTOR", "estimate_field_bytes", "field_bytes_for"]
+           "estimate_field_bytes", "field_bytes_for"]
 
 #: Default largest move per step as a fraction of the smallest radius. Two spheres
 #: then close in by at most 0.2 r per step, so a pair can only pass through each
@@ -39,27 +42,25 @@ __all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS", "rest_sp
 #: parameters within (0.1)^2/4 = 0.25 % of sigma^2 of grazing, which exchange almost
 #: no momentum. Tighter values trade speed for accuracy (tools/work_precision.py).
 DEFAULT_STEP_FRACTION = 0.1
-#: The default automatic rest speed factor (config.Rules.rest_speed_factor: a sphere
-#: resting on a support gains g h <= sqrt(2 g D) before the contact is resolved, so
-#: bounces slower than 2 sqrt(2 g D), dropped from below 4 D = 0.4 r at the default
-#: step, are perfectly inelastic; the threshold shrinks with step_fraction).
-REST_SPEED_FACTOR = DEFAULT.physics.rest_speed_factor
 #: Default limit on detect/resolve sweeps per step.
 DEFAULT_MAX_SWEEPS = 32
 
 
 def rest_speed_for(scene: Scene, step_fraction: float = DEFAULT_STEP_FRACTION,
                    tuning: Tuning = DEFAULT) -> float:
-    """The rest speed a Simulation uses [m/s]: the scene's ``rest_speed`` if given,
-    else rest_speed_factor * sqrt(2 |g| step_fraction r_min) with gravity (config.Rules)
-    and 0 (rule off) without; always 0 for elastic pairs (e = 1 stays exactly elastic)."""
+    """The impact speed a Simulation uses [m/s] (contacts/solver.py): approaches faster
+    than it are impacts (exact rewind with restitution), slower ones at touching or
+    nearly touching pairs and walls are persistent contacts. With gravity
+    Rules.impact_factor x sqrt(2 |g| D), D = step_fraction x r_min: sqrt(2 g D) is
+    the speed gravity adds in the longest step a resting scene takes (g h for h =
+    sqrt(2 D / g)); the scene's ``rest_speed`` if larger; 0 (no contact solver)
+    without either, and always for elastic pairs (e = 1 stays exactly elastic)."""
     if scene.restitution == 1.0:
         return 0.0
-    if scene.rest_speed is not None:
-        return float(scene.rest_speed)
     g = float(np.linalg.norm(scene.gravity))
-    return tuning.physics.rest_speed_factor * \
+    speed = tuning.physics.impact_factor * \
         math.sqrt(2.0 * g * step_fraction * float(scene.radius.min()))
+    return max(speed, float(scene.rest_speed or 0.0))
 
 
 def estimate_field_bytes(scene: Scene, precision: str = "f64",
@@ -74,20 +75,25 @@ def estimate_field_bytes(scene: Scene, precision: str = "f64",
     return field_bytes_for(engines.capacity_for(scene.n, engines.MIN_SPHERES),
                            engines.capacity_for(geom.n_cells, engines.MIN_CELLS), features,
                            _keeps_near_lists(scene, geom, tuning.performance), precision,
-                           tuning.performance.near_capacity)
+                           tuning.performance)
 
 
 def field_bytes_for(spheres: int, cells: int, features: Features, near_lists: bool,
-                    precision: str, near_capacity: int = DEFAULT.performance.near_capacity) -> int:
+                    precision: str, perf: Performance = DEFAULT.performance) -> int:
     """Bytes of an engine's fields with room for ``spheres`` and ``cells`` [bytes]."""
     real = 8 if precision == "f64" else 4
     # x, v, grid.xs, projection push (4 vec3), moved, earliest, projection rmax; hits,
-    # marked, touched, order, cell_of, slot, projection involved/near/stamp (+ support)
-    per_sphere = 12 * real + 3 * real + 9 * 4 + (4 if features.supports else 0)
+    # marked, touched, order, cell_of, slot, projection involved/near/stamp
+    per_sphere = 12 * real + 3 * real + 9 * 4
     per_sphere += (0 if features.equal_radii else real) + (0 if features.equal_masses else real)
     if near_lists:
-        per_sphere += (near_capacity + 2) * 4 + 3 * real   # near, near_id, n_near; x_near
+        per_sphere += (perf.near_capacity + 2) * 4 + 3 * real   # near, near_id, n_near; x_near
     per_cell = 9 * 4   # start, cursor; active, cell_pairs (2 x 2), active_list, by_colour
+    if features.contacts:
+        # solver rows (a, b; normal, gap, targets, meff, lam, mu), v_pre, x_pre, w, warm
+        per_sphere += perf.contacts_per_sphere * (2 * 4 + 9 * real) + 9 * real \
+            + perf.warm_slots * (4 + real) + 4
+        per_cell += 3 * 4   # cell_count, cell_fill, cell_start
     return spheres * per_sphere + cells * per_cell
 
 
@@ -158,7 +164,7 @@ class Simulation:
             self.features = Features(gravity_axes=(True, True, True),
                                      wall_axes=self.features.wall_axes, equal_radii=False,
                                      equal_masses=False, elastic=False, elastic_walls=False,
-                                     smid=self.features.smid, rest_rule=self.features.rest_rule)
+                                     smid=self.features.smid, contacts=self.features.contacts)
         self.geometry = GridGeometry.for_scene(scene, step_fraction, self.tuning.performance)
         self.runtime = runtime.ensure(arch, precision, threads)
         self.precision = self.runtime.precision
@@ -171,24 +177,24 @@ class Simulation:
                                        self.geometry.n_cells)
         self._parked = (scene.x, scene.v)
         self._bind()
-        # small CPU systems can run each step in one or two serial kernels (fused.py)
-        self._fused = self._engine.fused_step() if self.schedule.fused else None
         self._r_min = float(scene.radius.min())
         self._g = float(np.linalg.norm(scene.gravity))
         self.time = 0.0
         self._totals = dict(steps=0, pair_collisions=0, wall_collisions=0, wall_rests=0,
                             sweeps=0, unresolved=0, max_overlap=0.0, sweep_limit_hits=0,
-                            grid_rebuilds=0, multi_collision_spheres=0, rest_collisions=0,
-                            wall_rest_collisions=0,
-                            supported_collisions=0, energy_pair_restitution=0.0,
-                            energy_wall_restitution=0.0, energy_rest_rule=0.0, virial=0.0,
-                            projected_steps=0, projected_pairs=0, near_list_detections=0)
+                            grid_rebuilds=0, multi_collision_spheres=0,
+                            collapse_collisions=0, energy_pair_restitution=0.0,
+                            energy_wall_restitution=0.0, energy_collapse=0.0,
+                            energy_contacts=0.0, virial=0.0, projected_steps=0,
+                            projected_pairs=0, near_list_detections=0, contacts=0,
+                            contact_iterations=0, position_iterations=0,
+                            contact_residual=0.0, contact_steps=0)
+        # how a step runs (stepping.py): kernel by kernel, or fused for small CPU systems
+        self._stepper = stepping.Stepper(self, fused=self.schedule.fused)
         self.initial_energy = observe.total_energy(scene, scene.gravity)
         self.last_step = dict(h=0.0, unresolved=0, max_overlap=0.0, sweeps=0)
         self.sim_seconds = 0.0   # wall-clock time spent in advance()
-        self._motion.measure_vmax()
-        self._vmax2 = float(self._params.vmax2[None])
-        self._resting = False     # a sphere was supported by the floor in the last step
+        self._measure_vmax()
 
     # ---- public API ----
     @property
@@ -198,7 +204,7 @@ class Simulation:
     @property
     def fused(self) -> bool:
         """True when steps run as a fused kernel (asked for, CPU, below 3,000 spheres)."""
-        return self._fused is not None
+        return self._stepper.fused
 
     @property
     def overlap_tolerance(self) -> float:
@@ -222,23 +228,24 @@ class Simulation:
 
     @property
     def stats(self) -> dict:
-        """Counters since the start: steps, pair_collisions, wall_collisions, sweeps,
-        max_overlap (largest overlap left after a step / contact distance),
+        """Counters since the start: steps, pair_collisions, wall_collisions (impacts),
+        sweeps, max_overlap (largest overlap left after a step / contact distance),
         unresolved (approaching overlaps left when a step hit the sweep limit, summed
         over steps), wall_rests, sweep_limit_hits, grid_rebuilds;
         multi_collision_spheres (spheres with more than one pair or wall collision in
         a step, summed over steps: collisions of one sphere within a step are
-        resolved one after another, a source of error), rest_collisions (pair
-        collisions made perfectly inelastic by the rest rule or the collapse rule),
-        supported_collisions (of which against a supported sphere),
-        wall_rest_collisions (wall impacts made perfectly inelastic by the rest rule:
-        only on floor-like walls, where gravity presses the sphere into the wall); energy_pair_restitution,
-        energy_wall_restitution, energy_rest_rule (kinetic energy removed by each
-        cause [J]; see :meth:`energy_budget`); virial (sum over pair collisions of
-        r_ij . dp_i at contact [J s]: the collisional pressure over a time T in volume V
-        is virial / (3 V T)); near_list_detections (full detections taken from the
-        near lists instead of a grid scan: same pairs, see contacts.Contacts.detect);
-        plus time and dt."""
+        resolved one after another, a source of error), collapse_collisions (impacts
+        made perfectly inelastic by the collapse rule); energy_pair_restitution,
+        energy_wall_restitution, energy_collapse (energy removed by impacts [J]),
+        energy_contacts (by the contact solver [J]; see :meth:`energy_budget`); virial
+        (sum over pair collisions of r_ij . dp_i at contact [J s]: the collisional
+        pressure over a time T in volume V is virial / (3 V T)); near_list_detections
+        (full detections taken from the near lists instead of a grid scan: same pairs,
+        see contacts.Contacts.detect); of the contact solver (contacts/solver.py):
+        contact_steps (steps it ran), contacts (rows, summed over steps),
+        contact_iterations and position_iterations (velocity and split-impulse sweeps,
+        summed), contact_residual (largest velocity change of a last sweep [m/s]); plus
+        time and dt."""
         out = dict(self._totals)
         out["time"] = self.time
         out["dt"] = self.last_step["h"]
@@ -247,25 +254,25 @@ class Simulation:
     def energy_budget(self) -> dict:
         """Where the energy went since the start [J]: initial, current (kinetic +
         potential, potential -m g.x), kinetic, potential, the losses booked by pair
-        restitution, wall restitution and the rest rule, and ``unaccounted`` = initial
-        - current - booked losses (round-off; or, with resting contact, the energy
-        moved by placing spheres back on walls and by overlaps left over)."""
+        restitution, wall restitution, the collapse rule (impacts) and the contact
+        solver (``contacts``), and ``unaccounted`` = initial - current - booked losses
+        (round-off; or the energy of wall rests and of overlaps the projection moved)."""
         st = self.state()
         ke = observe.kinetic_energy(st)
         pe = observe.potential_energy(st, self.scene.gravity)
         t = self._totals
         booked = (t["energy_pair_restitution"] + t["energy_wall_restitution"]
-                  + t["energy_rest_rule"])
+                  + t["energy_collapse"] + t["energy_contacts"])
         return dict(initial=self.initial_energy, current=ke + pe, kinetic=ke, potential=pe,
                     pair_restitution=t["energy_pair_restitution"],
                     wall_restitution=t["energy_wall_restitution"],
-                    rest_rule=t["energy_rest_rule"],
+                    collapse=t["energy_collapse"], contacts=t["energy_contacts"],
                     unaccounted=self.initial_energy - (ke + pe) - booked)
 
     def state(self) -> State:
         """Numpy (float64) copy of positions, velocities, radii, masses and time."""
         self._check()
-        return State(x=self._state.positions(), v=self._state.velocities(),
+        return State(x=self._engine.state.positions(), v=self._engine.state.velocities(),
                      radius=self.scene.radius.copy(), mass=self.scene.mass.copy(),
                      time=self.time)
 
@@ -277,19 +284,19 @@ class Simulation:
         v = np.asarray(v, dtype=np.float64)
         if x.shape != (self.n, 3) or v.shape != (self.n, 3):
             raise ValueError(f"x and v must have shape ({self.n}, 3)")
-        self._state.load(x, v, self.scene.radius, self.scene.mass)
+        self._engine.state.load(x, v, self.scene.radius, self.scene.mass)
         if time is not None:
             self.time = float(time)
-        self._motion.measure_vmax()
-        self._vmax2 = float(self._params.vmax2[None])
+        self._measure_vmax()
 
     def checkpoint(self) -> dict:
         """Everything needed to continue bit-for-bit: state, time, step bound, counters."""
         self._check()
-        return dict(x=self._state.positions(), v=self._state.velocities(), time=self.time,
-                    vmax2=self._vmax2, resting=self._resting, totals=dict(self._totals), last_step=dict(self.last_step),
-                    n=self.n, precision=self.precision, step_fraction=self.step_fraction,
-                    max_sweeps=self.max_sweeps)
+        return dict(x=self._engine.state.positions(), v=self._engine.state.velocities(), time=self.time,
+                    vmax2=self._vmax2, totals=dict(self._totals),
+                    last_step=dict(self.last_step), n=self.n, precision=self.precision,
+                    step_fraction=self.step_fraction, max_sweeps=self.max_sweeps,
+                    warm=self._warm_rows())
 
     def restore(self, ckpt: dict) -> None:
         """Continue from :meth:`checkpoint` output of a Simulation of the same scene,
@@ -301,7 +308,8 @@ class Simulation:
                                  f"simulation's {mine!r}")
         self.set_state(ckpt["x"], ckpt["v"], ckpt["time"])
         self._vmax2 = float(ckpt["vmax2"])
-        self._resting = bool(ckpt.get("resting", False))
+        if ckpt.get("warm") is not None and self._engine.solver is not None:
+            self._engine.solver.load_warm(ckpt["warm"])
         self._totals.update(ckpt["totals"])
         self.last_step = dict(ckpt["last_step"])
 
@@ -331,79 +339,27 @@ class Simulation:
 
     def max_step(self) -> float:
         """Largest h such that no sphere moves more than step_fraction * r_min [s]:
-        v_max h + g h^2/2 <= D, i.e. h = 2 D / (v_max + sqrt(v_max^2 + 2 g D)); with
-        resting contact (gravity and the rest rule, and a sphere supported by the floor
-        in the last step) also g h <= rest_tolerance x rest speed / 2, so that the approach gravity adds in one step is below the rest
-        tolerance and resting piles converge in few sweeps."""
+        v_max h + g h^2/2 <= D, i.e. h = 2 D / (v_max + sqrt(v_max^2 + 2 g D))."""
         dist = self.step_fraction * self._r_min
         vmax = math.sqrt(max(self._vmax2, 0.0))
         denom = vmax + math.sqrt(vmax * vmax + 2.0 * self._g * dist)
-        h = math.inf if denom == 0.0 else 2.0 * dist / denom
-        if self.features.supports and self._resting:
-            # resting contact: gravity may add at most half the rest tolerance to an
-            # approach per step (see config.Rules.rest_tolerance)
-            h = min(h, 0.5 * self.tuning.physics.rest_tolerance * self.rest_speed / self._g)
-        return h
+        return math.inf if denom == 0.0 else 2.0 * dist / denom
 
     def step(self, h: float) -> None:
         """One step of length h [s] (does not advance ``time``; use advance)."""
         self._check()
-        sweeps = self._collide_step(h)
-        c = self._params.read_back()
-        remaining = int(c.remaining)
-        overlap = float(c.sep_overlap)
-        if remaining > 0:
-            overlap = max(overlap, float(c.open_overlap))
-        # projection only where overlaps can build up step after step: contacts left
-        # at the sweep limit, or spheres resting under gravity (a gas's leftover
-        # overlaps separate by themselves); a fused step has already done it
-        if c.projected:
-            overlap = float(c.proj_worst)
-            self._totals["projected_steps"] += 1
-            self._totals["projected_pairs"] += int(c.projected_pairs)
-        elif overlap > self.overlap_tolerance and (remaining > 0 or self.features.supports):
-            overlap = self._project()
-            # the counters again: spheres the projection put back inside the box
-            # count as wall events (and their energy), as in a fused step
-            c = self._params.read_back()
+        c, sweeps, remaining, overlap = self._stepper.step(h, self.max_sweeps)
         self._book_step(c, h, sweeps, remaining, overlap)
-
-    def _collide_step(self, h: float) -> int:
-        """Drift, grid, detection and detect/resolve sweeps of one step of length h [s]
-        (fused, or kernel by kernel); returns the sweeps it ran."""
-        sweeps = 0
-        remaining = None
-        if self._fused is not None:
-            outcome = self._fused.step(h, self.max_sweeps)
-            sweeps = outcome.sweeps
-            if outcome.rebuild:
-                # a sphere moved farther than the grid's margin: go on kernel by kernel
-                remaining = self._rebuild()
-            elif outcome.project:
-                self._fused.project()
-        else:
-            self._params.h[None] = h
-            self._motion.drift()
-            self._grid.build()
-            remaining = self._detect()
-        if remaining is not None:
-            while remaining > 0 and sweeps < self.max_sweeps:
-                found = decode_status(self._contacts.sweep(remaining))
-                remaining = found.remaining
-                sweeps += 1
-                if found.rebuild:
-                    remaining = self._rebuild()
-        return sweeps
 
     #: stats totals that add up the step counter of the same name (params.COUNTS/VALUES)
     _SUMMED = ("pair_collisions", "wall_collisions", "wall_rests", "multi_collision_spheres",
-               "rest_collisions", "wall_rest_collisions", "supported_collisions",
-               "energy_pair_restitution", "energy_wall_restitution", "energy_rest_rule",
-               "virial")
+               "collapse_collisions", "energy_pair_restitution", "energy_wall_restitution",
+               "energy_collapse", "energy_contacts", "virial", "contacts",
+               "contact_iterations", "position_iterations")
 
     def _book_step(self, c, h, sweeps, remaining, overlap):
         """Add a step's counters ``c`` (params.read_back) to the totals; keep its step
-        bound and whether a sphere rests on the floor."""
+        bound."""
         t = self._totals
         t["steps"] += 1
         t["sweeps"] += sweeps
@@ -414,40 +370,15 @@ class Simulation:
             t["sweep_limit_hits"] += 1
         t["max_overlap"] = max(t["max_overlap"], overlap)
         self._vmax2 = float(c.vmax2)
-        self._resting = bool(c.on_floor > 0)
+        if self._engine.solver is not None:
+            t["contact_steps"] += 1
+            t["contact_residual"] = max(t["contact_residual"], float(c.contact_residual))
         self.last_step = dict(h=h, unresolved=remaining, max_overlap=overlap, sweeps=sweeps,
-                              pair_collisions=int(c.pair_collisions),
-                              wall_collisions=int(c.wall_collisions),
-                              multi_collision_spheres=int(c.multi_collision_spheres))
+                              **{k: getattr(c, k) for k in self._LAST})
 
-    def _rebuild(self) -> int:
-        """A sphere moved farther than the grid's margin since the grid was built, so the
-        last re-detection may have missed a pair: re-bin and detect again; returns the
-        approaching overlaps found."""
-        self._grid.build()
-        self._totals["grid_rebuilds"] += 1
-        return self._detect()
-
-    def _detect(self) -> int:
-        """Full detection on a freshly built grid (from the near lists when they still
-        cover); returns the approaching overlaps found."""
-        status, from_list = self._contacts.detect()
-        self._totals["near_list_detections"] += int(from_list)
-        return decode_status(status).remaining
-
-    def _project(self) -> float:
-        """Push apart pairs overlapping beyond the tolerance (projection.py); returns
-        the largest relative overlap the last iteration measured."""
-        proj = self._projection
-        for it in range(self.tuning.physics.projection_iterations):
-            self._grid.build()
-            (proj.project_near if it else proj.project_all)()
-            if float(proj.worst[None]) <= self.overlap_tolerance:
-                break
-            self._totals["projected_pairs"] += int(proj.pushed[None])
-        proj.finish()
-        self._totals["projected_steps"] += 1
-        return float(proj.worst[None])
+    #: step counters kept in ``last_step``
+    _LAST = ("pair_collisions", "wall_collisions", "multi_collision_spheres", "contacts",
+             "contact_iterations", "position_iterations", "contact_residual")
 
     # ---- the engine this Simulation runs on ----
     def _engine_key(self, schedule: engines.Schedule) -> engines.EngineKey:
@@ -461,37 +392,24 @@ class Simulation:
     def _bind(self):
         """Load this Simulation into its engine's fields unless it is the one they hold."""
         if not self._engine.bound_to(self):
-            x, v = self._parked
-            self._engine.bind(self, x, v, self.geometry, self.rest_speed)
+            x, v = self._parked[:2]
+            warm = self._parked[2] if len(self._parked) > 2 else None
+            self._engine.bind(self, x, v, self.geometry, self.rest_speed, warm)
             self._parked = None
 
     def _park(self):
-        """Keep positions and velocities on the host: another Simulation takes the engine."""
-        self._parked = self._engine.state.rows()
+        """Keep positions, velocities and the contact solver's warm start on the host:
+        another Simulation takes the engine."""
+        self._parked = self._engine.state.rows() + (self._warm_rows(),)
 
-    @property
-    def _state(self):
-        return self._engine.state
+    def _warm_rows(self):
+        """The contact solver's warm-start table (ContactSolver.warm_rows) or None."""
+        return self._engine.solver.warm_rows(self.n) if self._engine.solver is not None else None
 
-    @property
-    def _params(self):
-        return self._engine.params
-
-    @property
-    def _motion(self):
-        return self._engine.motion
-
-    @property
-    def _grid(self):
-        return self._engine.grid
-
-    @property
-    def _contacts(self):
-        return self._engine.contacts
-
-    @property
-    def _projection(self):
-        return self._engine.projection
+    def _measure_vmax(self):
+        """The step bound's largest speed from the current velocities."""
+        self._engine.motion.measure_vmax()
+        self._vmax2 = float(self._engine.params.vmax2[None])
 
     # ---- introspection used by tests and tools ----
     def debug_view(self):
@@ -501,14 +419,15 @@ class Simulation:
         self._check()
         e = self._engine
         return types.SimpleNamespace(engine=e, state=e.state, params=e.params, motion=e.motion,
-                                     grid=e.grid, contacts=e.contacts, projection=e.projection)
+                                     grid=e.grid, contacts=e.contacts, projection=e.projection,
+                                     solver=e.solver)
 
     def grid_overlaps(self) -> np.ndarray:
         """Rebuild the grid at the current state and list overlapping approaching pairs
         (K, 2) sorted — for comparing the grid with brute force."""
         self._check()
-        self._grid.build()
-        return self._contacts.list_overlaps()
+        self._engine.grid.build()
+        return self._engine.contacts.list_overlaps()
 
     def _check(self):
         """Raise if Taichi was re-initialised since; bind this Simulation's engine."""

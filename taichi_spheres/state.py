@@ -28,11 +28,12 @@ class Features:
     elastic: bool            # pair restitution == 1
     elastic_walls: bool      # wall restitution == 1
     smid: bool = False       # pair restitution model "smid" (only with elastic False)
-    rest_rule: bool = False  # e = 0 below the rest speed (only with elastic False)
+    contacts: bool = False   # contact solver for persistent contacts (inelastic pairs)
 
     @classmethod
     def from_scene(cls, scene: Scene, rest_speed: float = 0.0) -> "Features":
-        """rest_speed: the resolved rest speed [m/s] (0 turns the rule off)."""
+        """rest_speed: the scene's floor of the impact speed [m/s]. The contact solver
+        runs for inelastic pairs under gravity, or with a rest speed."""
         elastic = scene.restitution == 1.0
         return cls(gravity_axes=tuple(bool(g != 0.0) for g in scene.gravity),
                    wall_axes=tuple(not p for p in scene.periodic),
@@ -41,13 +42,8 @@ class Features:
                    elastic=elastic,
                    elastic_walls=scene.wall_restitution == 1.0,
                    smid=not elastic and scene.restitution_model == "smid",
-                   rest_rule=not elastic and rest_speed > 0)
-
-    @property
-    def supports(self) -> bool:
-        """Slow contacts on top of supported spheres (floor or a supported sphere
-        below) treat the lower sphere as immovable: needs gravity and the rest rule."""
-        return self.gravity and self.rest_rule
+                   contacts=not elastic and (any(g != 0.0 for g in scene.gravity)
+                                             or rest_speed > 0))
 
     @property
     def gravity(self) -> bool:
@@ -78,8 +74,8 @@ class Features:
             "wall restitution: " + ("1, elastic (compiled out)" if self.elastic_walls
                                     else "inelastic"),
             "restitution model: " + ("smid" if self.smid else "normal"),
-            "rest rule: " + ("on" + (", with supports" if self.supports else "")
-                             if self.rest_rule else "off (compiled out)"),
+            "contact solver: " + ("on (persistent contacts, split impulse)"
+                                  if self.contacts else "off (compiled out)"),
         ]
 
 
@@ -111,8 +107,8 @@ class SphereState:
         inv_mass: (N,) real, only without equal masses [1/kg]
         moved: (N,) real — bound on the distance moved since the grid was built [m]
         hits: (N,) i32 — pair and wall collisions in the current step
-        support: (N,) i32, only with features.supports — 1 when the sphere rests on
-            the floor or on a supported sphere in the current step
+        loaded: (N,) i32, only with features.contacts — 1 when a contact row of the
+            sphere carried an impulse in the last step (contacts/solver.py)
         n_spheres: () i32 — spheres of the bound scene
         r0, m0: () real — the radius [m] and mass [kg] of every sphere when equal
     """
@@ -128,7 +124,7 @@ class SphereState:
         self.inv_mass = None if features.equal_masses else ti.field(real, shape=capacity)
         self.moved = ti.field(real, shape=capacity)
         self.hits = ti.field(ti.i32, shape=capacity)
-        self.support = ti.field(ti.i32, shape=capacity) if features.supports else None
+        self.loaded = ti.field(ti.i32, shape=capacity) if features.contacts else None
         self.n_spheres = ti.field(ti.i32, shape=())
         self.r0 = ti.field(real, shape=())
         self.m0 = ti.field(real, shape=())

@@ -38,8 +38,9 @@ __all__ = ["GSDWriter", "StepFrames", "GSDFrame", "read_frame", "scene_from_gsd"
 LOG_PREFIX = "taichi_spheres/"
 #: Simulation.stats counters logged with every frame
 LOGGED_STATS = ("steps", "pair_collisions", "wall_collisions", "wall_rests", "sweeps",
-                "max_overlap", "unresolved", "rest_collisions", "energy_pair_restitution",
-                "energy_wall_restitution", "energy_rest_rule", "virial")
+                "max_overlap", "unresolved", "collapse_collisions", "energy_pair_restitution",
+                "energy_wall_restitution", "energy_collapse", "energy_contacts", "virial",
+                "contacts", "contact_iterations")
 #: scenes with at most this many distinct radii (and no groups) get one type per radius
 MAX_SIZE_TYPES = 16
 _GSD_PRECISION = {"f64": "double", "f32": "single"}

@@ -89,28 +89,20 @@ class Motion:
     @ti.func
     def walls_and_wrap(self, i):
         """Bring sphere i back inside the box: wrap periodic axes, bounce off walls (see
-        the module docstring); mark it supported when it touched a floor-like wall
-        slowly (supports)."""
+        the module docstring)."""
         x = self.wrap_periodic(self.state.x[i])
         v = self.state.v[i]
         if ti.static(self.f.walls):
             r = self.state.rad(i)
             h = self.params.h[None]
             moved = ti.cast(0, self.real)
-            on_floor = False   # touched the wall gravity points into, in this call
             e_w = ti.cast(1, self.real)
             if ti.static(not self.f.elastic_walls):
                 e_w = self.params.e_wall[None]
             for a in ti.static(range(3)):
                 if ti.static(self.f.wall_axes[a]):
-                    x, v, moved, on_floor = self.walls_on_axis(i, a, x, v, moved, on_floor,
-                                                               r, h, e_w)
+                    x, v, moved = self.walls_on_axis(i, a, x, v, moved, r, h, e_w)
             self.state.moved[i] += moved
-            if ti.static(self.f.supports):
-                if on_floor and v.dot(self.params.up[None]) <= self.params.rest_speed[None]:
-                    if self.state.support[i] == 0:
-                        ti.atomic_add(self.params.on_floor[None], 1)
-                    self.state.support[i] = 1
         self.state.x[i] = x
         self.state.v[i] = v
 
@@ -127,10 +119,11 @@ class Motion:
         return x
 
     @ti.func
-    def walls_on_axis(self, i, a: ti.template(), x, v, moved, on_floor, r, h, e_w):
+    def walls_on_axis(self, i, a: ti.template(), x, v, moved, r, h, e_w):
         """The walls of axis a for sphere i of radius r [m] at x, v: bounce while it is
-        past one (up to max_bounces times, then rest on it); returns x, v, the bound
-        ``moved`` [m] grown by the moves, and on_floor (it touched a floor-like wall)."""
+        past one (up to max_bounces times, then rest on it); returns x, v and the bound
+        ``moved`` [m] grown by the moves. With the contact solver, a slow contact is
+        left to it (module docstring)."""
         g_a = ti.cast(0, self.real)
         if ti.static(self.f.gravity_axes[a]):
             g_a = self.params.gravity[None][a]
@@ -147,26 +140,21 @@ class Motion:
                 d = hi_c - x[a]
             if side == 0:
                 break
-            # floor-like: gravity presses the sphere into this wall
-            floor = False
-            if ti.static(self.f.gravity_axes[a]):
-                if side * g_a > 0:
-                    floor = True
-                    on_floor = True
             w = v[a] * side * -1
             acc = g_a * side * -1
             s = self._contact_time(d, w, acc, self.f.gravity_axes[a])
+            if ti.static(self.f.contacts):
+                if self.persistent(i, w, acc, s):
+                    break
             last = bounce == ti.static(self.max_bounces)
             xa = lo_c
             if side > 0:
                 xa = hi_c
             va = v[a]
             if not last and s >= 0 and s <= 2 * h:
-                xa, va, moved = self.bounce(i, d, w, acc, s, side, lo_c, hi_c, e_w, floor,
-                                            moved)
+                xa, va, moved = self.bounce(i, d, w, acc, s, side, lo_c, hi_c, e_w, moved)
             elif not last:
-                xa, va, moved = self.put_back(i, d, w, acc, side, lo_c, hi_c, e_w, floor,
-                                              moved, a)
+                xa, va, moved = self.put_back(i, d, w, acc, side, lo_c, hi_c, e_w, moved, a)
             else:
                 # still past the wall after max_bounces bounces: rest on it
                 if side < 0:
@@ -179,15 +167,54 @@ class Motion:
             v[a] = va
             if last:
                 break
-        return x, v, moved, on_floor
+        return x, v, moved
 
     @ti.func
-    def bounce(self, i, d, w, acc, s, side, lo_c, hi_c, e_w, floor, moved):
+    def persistent(self, i, w, acc, s):
+        """A sphere past a wall, moving into it at w (inward speed, < 0 into the wall)
+        with inward acceleration acc, which crossed it s ago (-1: not on its current
+        path), is a persistent contact: it met the wall slower than the impact speed."""
+        wc = w
+        if s >= 0:
+            wc = w - acc * s
+        return -wc < self.wall_impact_speed(i, acc)
+
+    @ti.func
+    def wall_impact_speed(self, i, acc):
+        """Impact speed of sphere i on a wall with inward acceleration acc [m/s^2]: the
+        impact speed where gravity presses spheres into the wall (acc < 0, a floor) or
+        where the sphere bears load (state.loaded: a contact row of it carried an
+        impulse in the last step, as in a pile against a side wall); else 0 (a sphere
+        in flight keeps its restitution on side walls and ceilings)."""
+        out = self.impact_speed()
+        if acc >= 0 and self.state.loaded[i] == 0:
+            out = ti.cast(0, self.real)
+        return out
+
+    @ti.func
+    def pair_impact_speed(self, i, j):
+        """Impact speed of pair (i, j): the impact speed if either sphere bears load
+        (state.loaded), else 0 (two spheres in flight collide exactly whatever their
+        speed)."""
+        out = self.impact_speed()
+        if self.state.loaded[i] == 0 and self.state.loaded[j] == 0:
+            out = ti.cast(0, self.real)
+        return out
+
+    @ti.func
+    def impact_speed(self):
+        """Approach speed from which a pair or wall contact is an impact [m/s]
+        (params.rest_speed: simulation.rest_speed_for); slower ones are persistent
+        contacts (contacts/solver.py)."""
+        return self.params.rest_speed[None]
+
+    @ti.func
+    def bounce(self, i, d, w, acc, s, side, lo_c, hi_c, e_w, moved):
         """A crossing s [s] ago on the current path (d < 0 past the contact plane, w and
         acc inward speed and acceleration): rebound at contact and carry forward;
         returns the new coordinate [m], velocity component [m/s] and moved [m]."""
         wc = w - acc * s
-        wn = self.rebound(i, -wc, e_w, floor)
+        wn = self.rebound(i, -wc, e_w)
         dn = wn * s + ti.cast(0.5, self.real) * acc * s * s
         xa = lo_c + dn
         if side > 0:
@@ -199,7 +226,7 @@ class Motion:
         return xa, va, moved
 
     @ti.func
-    def put_back(self, i, d, w, acc, side, lo_c, hi_c, e_w, floor, moved, a: ti.template()):
+    def put_back(self, i, d, w, acc, side, lo_c, hi_c, e_w, moved, a: ti.template()):
         """Past the wall without a crossing on its current path (a pair collision
         carried it there, or it rests on the wall): without gravity on the axis mirror
         it into the box and reflect (energy exact for e = 1); with gravity put it on the
@@ -215,7 +242,7 @@ class Motion:
         wn = w
         if mirror:
             if w < 0:
-                wn = self.rebound(i, -w, e_w, floor)
+                wn = self.rebound(i, -w, e_w)
             xa = lo_c - d
             if side > 0:
                 xa = hi_c + d
@@ -226,31 +253,20 @@ class Motion:
             w2 = ti.max(w * w - 2 * acc * d, 0)
             wn = ti.sqrt(w2)
             if w < 0:
-                wn = self.rebound(i, wn, e_w, floor)
+                wn = self.rebound(i, wn, e_w)
             moved += -d
             ti.atomic_add(self.params.wall_rests[None], 1)
         va = wn * side * -1
         return xa, va, moved
 
     @ti.func
-    def rebound(self, i, speed, e_w, floor):
+    def rebound(self, i, speed, e_w):
         """Outward normal speed after sphere i hits a wall at normal speed ``speed`` >= 0
-        [m/s]: e_w x speed, or 0 below the rest speed (rest rule) on a floor-like wall
-        (``floor``: gravity presses the sphere into it, g . n_wall > 0 for the wall's
-        outward normal; side walls and ceilings keep their restitution). Books the
-        kinetic energy removed (vals E_WALLS or E_REST) and counts a rest-rule firing
-        (count WALL_RESTED)."""
+        [m/s]: e_w x speed. Books the kinetic energy removed
+        (params.energy_wall_restitution)."""
         out = e_w * speed
-        rested = False
-        if ti.static(self.f.rest_rule and self.f.gravity):
-            if floor and speed < self.params.rest_speed[None]:
-                out = ti.cast(0, self.real)
-                rested = True
-                ti.atomic_add(self.params.wall_rest_collisions[None], 1)
-                ti.atomic_add(self.params.energy_rest_rule[None], ti.cast(0.5, self.real) * self.state.mass_of(i) * speed * speed)
         if ti.static(not self.f.elastic_walls):
-            if not rested:
-                ti.atomic_add(self.params.energy_wall_restitution[None], ti.cast(0.5, self.real) * self.state.mass_of(i) * (speed * speed - out * out))
+            ti.atomic_add(self.params.energy_wall_restitution[None], ti.cast(0.5, self.real) * self.state.mass_of(i) * (speed * speed - out * out))
         return out
 
     @ti.func
@@ -270,8 +286,6 @@ class Motion:
         for i in range(self.state.n_spheres[None]):
             h = self.params.h[None]
             self.state.hits[i] = 0
-            if ti.static(self.f.supports):
-                self.state.support[i] = 0
             if ti.static(self.f.gravity):
                 grav = self.params.gravity[None]
                 self.state.x[i] += self.state.v[i] * h + ti.cast(0.5, self.real) * grav * h * h

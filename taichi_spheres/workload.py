@@ -7,7 +7,7 @@ h = 2 D / (v + sqrt(v^2 + 2 g D)). Over a run the fastest speed grows with gravi
 v(t) = v0 + g t, up to what a fall across the box adds, sqrt(v0^2 + 2 sum_a |g_a| L_a)
 (without bound along a periodic axis with gravity); every frame also ends a step. The
 integral of 1/h over the run plus the frame count is the estimate: an order of
-magnitude (collisions can speed single spheres up, resting piles take shorter steps,
+magnitude (collisions can speed single spheres up, dense piles spend more contact-solver sweeps per step,
 inelastic collisions slow spheres down).
 
 Pure numpy and the Simulation's public API: importing this module does not import Taichi.

@@ -74,7 +74,7 @@ def test_csv_with_a_value_that_is_not_a_number(tmp_path):
     columns = ",".join(plot.REQUIRED_COLUMNS)
     values = ",".join(["0"] * (len(plot.REQUIRED_COLUMNS) - 1) + ["oops"])
     (tmp_path / "bad.csv").write_text(f"{columns}\n{values}\n")
-    with pytest.raises(ValueError, match="bad.csv: column energy_rest_rule"):
+    with pytest.raises(ValueError, match="bad.csv: column energy_contacts"):
         plot.read_diagnostics(str(tmp_path / "bad.csv"))
 
 

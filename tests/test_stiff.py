@@ -60,8 +60,9 @@ def _check_rest(sim, scene, energies, sigma_frac, floor_frac):
     overlap = 1 - d / (r[:, None] + r[None])
     assert overlap.max() < sigma_frac, f"a sphere sank {overlap.max():.2e} sigma into another"
     assert np.all(st.x[:, 2] - r > -floor_frac * r), "a sphere sank into the floor"
-    assert np.all(st.x - r[:, None] >= scene.box_lo - 1e-9)
-    assert np.all(st.x + r[:, None] <= scene.box_hi + 1e-9)
+    # walls: within the contact solver's overlap tolerance (1e-4 of a diameter)
+    assert np.all(st.x - r[:, None] >= scene.box_lo - 2e-4 * r[:, None])
+    assert np.all(st.x + r[:, None] <= scene.box_hi + 2e-4 * r[:, None])
     e0 = energies[0]
     assert max(energies) <= e0 + 1e-9 * abs(e0)
     return st
@@ -77,17 +78,15 @@ def test_stacked_column_comes_to_rest(arch, precision):
                                  restitution=0.5, wall_restitution=0.5,
                                  box=((0, 0, 0), (1, 1, 2)))
     sim = ts.Simulation(scene, arch=arch, precision=precision)
-    assert sim.features.supports
+    assert sim.features.contacts
     energies = [ts.observe.total_energy(sim.state(), scene.gravity)]
     for t in (0.25, 0.5, 0.75, 1.0):
         sim.advance_to(t)
         energies.append(ts.observe.total_energy(sim.state(), scene.gravity))
     st = _check_rest(sim, scene, energies, 0.005, 0.01)
-    # at rest = speeds at the scale of the rest tolerance v_tol (config.Rules.rest_tolerance
-    # x rest speed): a resting sphere creeps until its approach exceeds v_tol, and
-    # gravity adds at most v_tol / 2 per step
-    v_tol = sim.tuning.physics.rest_tolerance * sim.rest_speed
-    assert ts.observe.kinetic_energy(st) < 0.5 * scene.mass.sum() * (2 * v_tol) ** 2
+    # at rest: speeds at the scale of the contact solver's tolerance
+    v_tol = 1e-5 if precision == "f64" else 1e-3
+    assert ts.observe.kinetic_energy(st) < 0.5 * scene.mass.sum() * v_tol ** 2
     assert sim.stats["sweep_limit_hits"] == 0
     assert np.all(np.abs(st.x[:, :2] - 0.5) < 1e-9), "the column stays straight"
 
@@ -142,8 +141,7 @@ def test_fused_step_and_projection_near_sets_match_kernel_by_kernel(arch):
         sim.advance(0.6)
         runs[name] = (sim.state(), sim.stats)
     a, stats = runs["kernels"]
-    assert stats["projected_steps"] > 0 and stats["sweep_limit_hits"] > 0
-    assert stats["projected_pairs"] > stats["projected_steps"]   # later iterations ran
+    assert stats["contacts"] > 0 and stats["pair_collisions"] > 0
     for b, stats_b in runs.values():
         assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
         assert stats_b == stats
@@ -421,11 +419,11 @@ def test_fused_step_hands_over_to_kernels_after_a_rebuild(arch):
 
 
 def test_slow_side_wall_and_ceiling_bounces_keep_their_restitution(arch, precision):
-    """Under gravity the rest rule makes only floor-like wall impacts (gravity pressing
-    the sphere into the wall) perfectly inelastic: a sphere meeting a side wall at 0.12
-    m/s and one reaching the ceiling at 0.05 m/s, both below the automatic rest speed,
-    leave with e_w times their speed; a slow floor impact rests, and every firing of
-    the rule is counted (stats['wall_rest_collisions'])."""
+    """Under gravity only floor-like walls (gravity pressing the sphere into the wall)
+    have an impact speed: a sphere meeting a side wall at 0.12 m/s and one reaching the
+    ceiling at 0.05 m/s, both below the floor's impact speed, leave with e_w times their
+    speed; a slow floor approach is a persistent contact and rests, its energy booked
+    to the contact solver."""
     r, e_w, g = 0.05, 0.8, 9.81
     gap = 1e-3
     v_ceiling = 0.05                      # normal speed at the ceiling
@@ -444,5 +442,4 @@ def test_slow_side_wall_and_ceiling_bounces_keep_their_restitution(arch, precisi
                                        rel=tol(precision, 1e4))
     assert st.x[2, 2] == pytest.approx(r, abs=tol(precision, 10))   # rests on the floor
     assert sim.stats["wall_collisions"] >= 2
-    assert sim.stats["wall_rest_collisions"] >= 1
-    assert sim.stats["energy_rest_rule"] > 0
+    assert sim.stats["energy_contacts"] > 0

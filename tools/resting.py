@@ -3,7 +3,8 @@
 
 For each case it prints and writes to docs/resting.md (with date, machine and the
 command): kinetic energy at the end and its peak, total energy change, the energy
-budget (pair restitution, wall restitution, rest rule, unaccounted), the largest
+budget (pair restitution, wall restitution, collapse rule, contact solver,
+unaccounted), the contact solver's work (contacts and sweeps per step), the largest
 overlap between any two spheres (brute force, relative to the contact distance) and
 below the floor (relative to the radius), steps, sweeps per step, sweep-limit hits,
 projected steps, and the wall time.
@@ -81,7 +82,10 @@ def run(scene, t_end, samples=12):
                 ke_peak=max(kinetic), e0=b["initial"], e_max=max(total), e_end=b["current"],
                 budget=b, pair=pair, floor=floor, steps=s["steps"],
                 sweeps=s["sweeps"] / max(s["steps"], 1), limit=s["sweep_limit_hits"],
-                projected=s["projected_steps"], rest_speed=sim.rest_speed,
+                projected=s["projected_steps"], impact_speed=sim.rest_speed,
+                contacts=s["contacts"] / max(s["contact_steps"], 1),
+                iterations=s["contact_iterations"] / max(s["contact_steps"], 1),
+                residual=s["contact_residual"],
                 mgr=float(scene.mass.sum() * np.linalg.norm(scene.gravity) * scene.radius.max()))
 
 
@@ -101,20 +105,26 @@ def markdown(rows, command, total):
                    f"{r['floor']:.1e} | {r['steps']} | {r['sweeps']:.1f} | {r['limit']} | "
                    f"{r['projected']} | {r['wall']:.0f} |")
     out.append("\nEnergy budget at the end (J): lost to pair restitution, wall restitution, "
-               "the rest rule, and unaccounted (initial − current − booked):\n")
-    out.append("| case | rest speed (m/s) | pairs | walls | rest rule | unaccounted |")
-    out.append("|:--|--:|--:|--:|--:|--:|")
+               "the collapse rule, the contact solver, and unaccounted (initial − current − "
+               "booked); the impact speed (approaches slower than it at touching pairs and "
+               "walls are persistent contacts) and the contact solver's rows and velocity "
+               "sweeps per step it ran, and its largest residual:\n")
+    out.append("| case | impact speed (m/s) | pairs | walls | collapse | contacts | unaccounted "
+               "| contacts/step | sweeps/step | residual (m/s) |")
+    out.append("|:--|--:|--:|--:|--:|--:|--:|--:|--:|--:|")
     for r in rows:
         b = r["budget"]
-        out.append(f"| {r['name']} | {r['rest_speed']:.3g} | {b['pair_restitution']:.4g} | "
-                   f"{b['wall_restitution']:.4g} | {b['rest_rule']:.4g} | {b['unaccounted']:.3g} |")
+        out.append(f"| {r['name']} | {r['impact_speed']:.3g} | {b['pair_restitution']:.4g} | "
+                   f"{b['wall_restitution']:.4g} | {b['collapse']:.4g} | {b['contacts']:.4g} | "
+                   f"{b['unaccounted']:.3g} | {r['contacts']:.1f} | {r['iterations']:.1f} | "
+                   f"{r['residual']:.1e} |")
     out.append("\nKE peak is the largest of the sampled kinetic energies (12 samples; the "
                "column starts at rest, so its ratio says nothing: see KE end / (M g r), the "
-               "kinetic energy left against that of the whole mass falling one radius). A "
-               "negative `unaccounted` is potential energy given back by projection to "
-               "spheres that had crept into each other (their sinking was booked to the rest "
-               "rule); `max(E) − E0` ≤ 0 means the total energy never rose above its start "
-               "at the samples.\n")
+               "kinetic energy left against that of the whole mass falling one radius). "
+               "`unaccounted` is round-off, or the energy of wall rests and of overlaps the "
+               "projection moved (`Simulation.energy_budget`; the contact solver books the "
+               "potential energy of its own moves); `max(E) − E0` ≤ 0 means the total "
+               "energy never rose above its start at the samples.\n")
     return "\n".join(out)
 
 

@@ -393,7 +393,7 @@ def run_haff(e=0.9, model="normal", n=1000, packing=0.1, t_end=2.0, samples=16, 
         ktm = kT_over_m(sim.state())
         # loss in this interval against collisions x kT (mean of the interval's ends)
         loss_sum += (s["energy_pair_restitution"] - s_prev["energy_pair_restitution"]
-                     + s["energy_rest_rule"] - s_prev["energy_rest_rule"])
+                     + s["energy_collapse"] - s_prev["energy_collapse"])
         weight_sum += ((s["pair_collisions"] - s_prev["pair_collisions"])
                        * (1.0 - e * e) * mass * 0.5 * (ktm + temps[-1]))
         # Enskog's expected collisions in the interval: N/2 x integral of Gamma_E(T) dt,
@@ -416,9 +416,9 @@ def run_haff(e=0.9, model="normal", n=1000, packing=0.1, t_end=2.0, samples=16, 
                 loss_factor=loss_sum / weight_sum, loss_factor_theory=HAFF_LOSS_FACTOR[model],
                 rate_factor=(sim.stats["pair_collisions"] - k_origin) / expected,
                 unaccounted=budget["unaccounted"] / budget["initial"],
-                booked=(budget["pair_restitution"] + budget["rest_rule"]) / budget["initial"],
+                booked=(budget["pair_restitution"] + budget["collapse"]) / budget["initial"],
                 lost=1.0 - budget["kinetic"] / budget["initial"],
-                rest_collisions=s["rest_collisions"], collisions=s["pair_collisions"],
+                collapse_collisions=s["collapse_collisions"], collisions=s["pair_collisions"],
                 flow=flow_fraction(st, side), sim_time=sim.time,
                 run_seconds=time.perf_counter() - t_start)
 
@@ -469,7 +469,7 @@ def haff_ensemble(e, model, seeds=(0, 1, 2, 3), **kw):
                cps=float(np.mean([2.0 * r["collisions"] / r["n"] for r in runs])),
                unaccounted=max(abs(r["unaccounted"]) for r in runs),
                flow=max(r["flow"] for r in runs),
-               rest_collisions=sum(r["rest_collisions"] for r in runs))
+               collapse_collisions=sum(r["collapse_collisions"] for r in runs))
     for key, value in (("inv_t0", lambda r: r["inv_t0"] / r["inv_t0_theory"] - 1.0),
                        ("loss", lambda r: r["loss_factor"] / r["loss_factor_theory"] - 1.0),
                        ("rate", lambda r: r["rate_factor"] - 1.0),
@@ -515,8 +515,8 @@ def write_markdown(path, command, elapsed, features, maxwell, eos, haff, dense):
            "Compiled features, elastic runs (`sim.features.describe()`): "
            + "; ".join(features["elastic"]) + ".", "",
            "Inelastic runs (Haff, smid model shown): " + "; ".join(features["inelastic"])
-           + ". Without gravity the rest speed is 0, so the rest rule is compiled out "
-           "and does not act; the collapse rule (perfectly inelastic from a sphere's 4th "
+           + ". Without gravity the impact speed is 0, so the contact solver is compiled "
+           "out and does not act; the collapse rule (perfectly inelastic from a sphere's 4th "
            "collision within one step) is counted below.", "",
            "## Summary", "",
            "| comparison | measured | theory | rel. error | simulated time | run s |",
@@ -673,7 +673,7 @@ def write_markdown(path, command, elapsed, features, maxwell, eos, haff, dense):
                        pct(h["inv_t0"], h["inv_t0_se"]),
                        pct(h["loss"], h["loss_se"]), pct(h["rate"], h["rate_se"]),
                        pct(h["temp"], h["temp_se"]), f"{h['unaccounted']:.1e}",
-                       h["rest_collisions"], f"{h['flow']:.2f}", f"{h['run_seconds']:.1f}"))
+                       h["collapse_collisions"], f"{h['flow']:.2f}", f"{h['run_seconds']:.1f}"))
     out += ["", "T(t)/T0 against Haff's law, mean \u00b1 standard error over the seeds:", "",
             "| e | model | t/t0 | T/T0 | Haff | rel |", "|---|---|---|---|---|---|"]
     for h in haff:

@@ -15,8 +15,6 @@ or, for the bouncing ball, from the closed form):
              perturbation differs by a few 1e-11 there (printed as the "chaos
              check"), so chaos does not yet swamp round-off): max_i |x_engine -
              x_ref| / box side.
-  gravity-norest  the gravity case with rest_speed = 0: what the rest rule (and the
-             step cap that comes with it) costs in accuracy and time.
   gravity    the same gas released 5 m above the floor of a tall box, g = 9.81,
              e = e_wall = 0.9, to t = 1.2 s (a few first floor contacts, no resting):
              max_i |x_engine - x_ref| / box width.
@@ -272,16 +270,10 @@ def run_traj(settings, runs=LocalRuns()):
         trajectory_error, T=T, xr=xr, side=side, counter="steps"))
 
 
-def run_gravity(settings, runs=LocalRuns(), rest_rule=True):
-    """rest_rule False: the same scene with rest_speed = 0 (the rest rule, supported
-    contacts and the step cap that go with it switched off) to measure their effect."""
-    name = "gravity" if rest_rule else "gravity-norest"
-    title = "Trajectory under gravity, gas N=64 falling, e = e_w = 0.9, t = 1.2 s" + \
-        ("" if rest_rule else ", rest rule off (rest_speed = 0)")
-    case = Case(name, title, "max |x - x_ref| / box width")
+def run_gravity(settings, runs=LocalRuns()):
+    case = Case("gravity", "Trajectory under gravity, gas N=64 falling, e = e_w = 0.9, "
+                "t = 1.2 s", "max |x - x_ref| / box width")
     scene, side = scene_gravity()
-    if not rest_rule:
-        scene = scene.replace(rest_speed=0.0)
     T = 1.2
     ref, case.ref_seconds = timed_reference(scene, T)
     xr = ref.state().x
@@ -733,7 +725,6 @@ def run_all(names, fractions, f32, counts_T, sizes, budget, runs):
     """The cases ``names`` (f64 at ``fractions``, then f32 at ``f32``) with their engine
     runs on ``runs``, and the speed rows of ``sizes`` (run here); (cases, speed)."""
     runners = dict(traj=run_traj, gravity=run_gravity,
-                   **{"gravity-norest": lambda s, r: run_gravity(s, r, rest_rule=False)},
                    counts=lambda s, r: run_counts(s, counts_T, r), bounce=run_bounce,
                    pressure=run_pressure)
     # all f64 runs first: switching precision re-initialises Taichi
@@ -758,7 +749,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="fewer settings, shorter runs")
     ap.add_argument("--fractions", type=float, nargs="+", default=None)
     ap.add_argument("--no-f32", action="store_true", help="skip the f32 rows")
-    names = ["traj", "gravity", "gravity-norest", "counts", "bounce", "pressure"]
+    names = ["traj", "gravity", "counts", "bounce", "pressure"]
     ap.add_argument("--cases", nargs="+", default=names, choices=names)
     ap.add_argument("--speed-sizes", type=int, nargs="*", default=None,
                     help=f"N of the reference-vs-engine speed gases [{SPEED_SIZES}; "

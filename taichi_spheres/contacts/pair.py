@@ -66,25 +66,22 @@ class PairRule:
         return du < -ti.cast(ti.static(self.approach_eps), self.real) * ti.sqrt(dd * (uu + ss))
 
     @ti.func
-    def resting(self, i, j):
-        """The rest rule applies to pair (i, j): always when the scene set a rest speed
-        without gravity; with gravity (supports) only when one of the two spheres is
-        supported in this step (a contact of a pile, not of a gas in flight)."""
-        out = True
-        if ti.static(self.f.supports):
-            out = self.state.support[i] == 1 or self.state.support[j] == 1
+    def approaching_pair(self, i, j, dd, du, uu, ss):
+        """approaching(), and with the contact solver (Features.contacts) faster than
+        the pair's impact speed (walls.Motion.pair_impact_speed: 0 unless one of the
+        two bears load): a slower approach is a persistent contact, solved by the
+        contact solver instead of rewound."""
+        out = self.approaching(dd, du, uu, ss)
+        if ti.static(self.f.contacts):
+            if out:
+                vimp = self.motion.pair_impact_speed(i, j)
+                out = du * du > vimp * vimp * dd
         return out
 
     @ti.func
-    def approaching_pair(self, i, j, dd, du, uu, ss):
-        """approaching(), and for a resting contact (see resting()) faster than
-        rules.rest_tolerance x the rest speed: a slower one is left alone (it closes the gap by
-        less than that speed x h per step; gravity makes it faster by g h in the next)."""
-        out = self.approaching(dd, du, uu, ss)
-        if ti.static(self.f.rest_rule):
-            if out and self.resting(i, j):
-                out = du * du > ti.static(self.rules.rest_tolerance ** 2) * self.params.rest_speed[None] ** 2 * dd
-        return out
+    def impact_speed(self):
+        """Approach speed from which a pair is an impact [m/s] (walls.Motion.impact_speed)."""
+        return self.motion.impact_speed()
 
     @ti.func
     def contact_time(self, i, j, d, u, sigma):
@@ -110,7 +107,7 @@ class PairRule:
                 out = ti.min(s, h)
             elif s <= h:
                 dc = d - u * s
-                if self.approaching(dc.norm_sqr(), dc.dot(u), uu, ss):
+                if self.approaching_pair(i, j, dc.norm_sqr(), dc.dot(u), uu, ss):
                     out = s
         return out
 
@@ -121,17 +118,9 @@ class PairRule:
         Restitution (see the module docstring): "normal" u_n' = -e u_n with the
         tangential relative velocity unchanged; "smid" (Features.smid) the seed's rule
         after Smid (2007), u' = e (u - 2 u_n n): the whole relative velocity of the
-        elastic result scaled by e about the centre of mass. Rest rule
-        (Features.rest_rule): an approach slower than the rest speed is perfectly
-        inelastic in the normal direction (u_n' = 0, tangential kept) whatever the
-        model. Supports (Features.supports): such a slow contact whose normal is
-        within about 66 degrees of vertical (rules.support_cos), with a supported sphere
-        below (on the floor, or itself stopped by a supported sphere in this step) and an
-        unsupported one
-        above, stops the upper sphere's approach without moving the lower one (the
-        floor carries the load: shock propagation, Guendelman et al. 2003), unless
-        that would raise the upper sphere's kinetic energy; the upper sphere is then
-        supported. Energy removed is booked per cause (vals E_PAIRS, E_REST)."""
+        elastic result scaled by e about the centre of mass. Collapse rule
+        (slow_contact): perfectly inelastic in the normal direction. Energy removed is
+        booked per cause (params.energy_pair_restitution, energy_collapse)."""
         d, sigma = self.separation(i, j)
         u = self.rel_velocity(i, j)
         rc = d - u * s
@@ -141,24 +130,21 @@ class PairRule:
             e = ti.cast(1, self.real)
             if ti.static(not self.f.elastic):
                 e = self.params.e[None]
-            dvi, dvj = self.velocity_change(i, j, n, un, u, e, self.slow_contact(i, j, e, un), s)
+            dvi, dvj = self.velocity_change(i, j, n, un, u, e, self.collapsing(i, j, e))
             self.apply_collision(i, j, dvi, dvj, s, rc)
 
     @ti.func
-    def slow_contact(self, i, j, e, un):
-        """Whether the collapse rule or the rest rule makes this collision (normal
-        approach speed -un [m/s]) perfectly inelastic in the normal direction. Collapse:
-        from a sphere's rules.collapse_hits-th collision in one step on (inelastic pairs
-        only; e < 1 checked here too: compiled in with e = 1 it must not change the
-        physics), so that dense clusters cannot collide without end within a step.
-        Rest: slower than the rest speed, for a resting contact (see resting())."""
-        rest = False
+    def collapsing(self, i, j, e):
+        """Whether the collapse rule makes this collision perfectly inelastic in the
+        normal direction: from a sphere's rules.collapse_hits-th collision in one step
+        on (inelastic pairs only; e < 1 checked here too: compiled in with e = 1 it must
+        not change the physics), so that dense clusters cannot collide without end
+        within a step."""
+        out = False
         if ti.static(not self.f.elastic):
-            rest = e < 1 and ti.max(self.state.hits[i], self.state.hits[j]) >= \
+            out = e < 1 and ti.max(self.state.hits[i], self.state.hits[j]) >= \
                 ti.static(self.rules.collapse_hits - 1)
-        if ti.static(self.f.rest_rule):
-            rest = rest or (-un < self.params.rest_speed[None] and self.resting(i, j))
-        return rest
+        return out
 
     @ti.func
     def pair_weights(self, i, j):
@@ -176,35 +162,30 @@ class PairRule:
         return wi, wj, meff
 
     @ti.func
-    def velocity_change(self, i, j, n, un, u, e, rest, s):
+    def velocity_change(self, i, j, n, un, u, e, collapse):
         """(dv_i, dv_j) [m/s] of the collision of (i, j) with normal n, normal relative
-        speed un < 0 and relative velocity u, restitution e; ``rest``: perfectly
-        inelastic (normal), or the supported stop (supports). Books the energy removed
-        per cause (vals E_PAIRS, E_REST) and the rule's firing (count RESTED)."""
+        speed un < 0 and relative velocity u, restitution e; ``collapse``: perfectly
+        inelastic (normal). Books the energy removed per cause
+        (params.energy_pair_restitution, energy_collapse, collapse_collisions)."""
         wi, wj, meff = self.pair_weights(i, j)
         dvi = ti.Vector.zero(self.real, 3)
         dvj = ti.Vector.zero(self.real, 3)
-        done = False
-        if ti.static(self.f.supports):
-            if rest:
-                done, dvi, dvj = self.supported_stop(i, j, n, un, s)
-        if not done:
-            if rest:
-                dvi = -un * wi * n
-                dvj = un * wj * n
-                ti.atomic_add(self.params.energy_rest_rule[None], 0.5 * meff * un * un)
-                ti.atomic_add(self.params.rest_collisions[None], 1)
-            else:
-                du = -(1 + e) * un * n
-                loss = 0.5 * meff * (1 - e * e) * un * un
-                if ti.static(self.f.smid):
-                    # u' = e (u - 2 u_n n): du = u' - u
-                    du = e * (u - 2 * un * n) - u
-                    loss = 0.5 * meff * (1 - e * e) * u.norm_sqr()
-                dvi = wi * du
-                dvj = -wj * du
-                if ti.static(not self.f.elastic):
-                    ti.atomic_add(self.params.energy_pair_restitution[None], loss)
+        if collapse:
+            dvi = -un * wi * n
+            dvj = un * wj * n
+            ti.atomic_add(self.params.energy_collapse[None], 0.5 * meff * un * un)
+            ti.atomic_add(self.params.collapse_collisions[None], 1)
+        else:
+            du = -(1 + e) * un * n
+            loss = 0.5 * meff * (1 - e * e) * un * un
+            if ti.static(self.f.smid):
+                # u' = e (u - 2 u_n n): du = u' - u
+                du = e * (u - 2 * un * n) - u
+                loss = 0.5 * meff * (1 - e * e) * u.norm_sqr()
+            dvi = wi * du
+            dvj = -wj * du
+            if ti.static(not self.f.elastic):
+                ti.atomic_add(self.params.energy_pair_restitution[None], loss)
         return dvi, dvj
 
     @ti.func
@@ -227,46 +208,6 @@ class PairRule:
         ti.atomic_max(self.params.vmax2[None], ti.max(self.state.v[i].norm_sqr(),
                                                       self.state.v[j].norm_sqr()))
         ti.atomic_max(self.params.moved[None], ti.max(self.state.moved[i], self.state.moved[j]))
-
-    @ti.func
-    def supported_stop(self, i, j, n, un, s):
-        """The supported-contact rule of :meth:`collide` for a slow approach (u_n =
-        un < 0, n from j to i, contact s ago): (applied, dv_i, dv_j). Only the upper
-        sphere changes: by dv now and dv s in position (carried forward), so its
-        energy changes by m (|v + dv|^2 - |v|^2)/2 - m g.dv s (momentum is not
-        conserved: the support takes it). Applied only if that change is not
-        positive (beyond round-off); then the upper sphere is supported and the
-        loss is booked to the rest rule."""
-        done = False
-        dvi = ti.Vector.zero(self.real, 3)
-        dvj = ti.Vector.zero(self.real, 3)
-        up = n.dot(self.params.up[None])
-        upper = -1
-        si = self.state.support[i]
-        sj = self.state.support[j]
-        if up > ti.static(self.rules.support_cos) and sj == 1 and si == 0:
-            upper = i
-            dvi = -un * n          # (v_i' - v_j).n = 0
-        elif up < -ti.static(self.rules.support_cos) and si == 1 and sj == 0:
-            upper = j
-            dvj = un * n           # (v_i - v_j').n = 0
-        if upper >= 0:
-            dv = dvi + dvj
-            v = self.state.v[upper]
-            lift = -self.params.gravity[None].dot(dv) * s
-            gain = 0.5 * ((v + dv).norm_sqr() - v.norm_sqr()) + lift
-            # round-off: of the kinetic terms, and of the potential energy at the
-            # sphere's height (positions carry eps |x| of noise: spheres sitting
-            # on each other overlap by that much)
-            g = self.params.gravity[None].norm()
-            scale = 0.5 * v.norm_sqr() + ti.abs(lift) + g * (self.state.x[upper].norm() + self.state.rad(upper))
-            if gain <= ti.static(2 * self.approach_eps) * scale:
-                done = True
-                self.state.support[upper] = 1
-                ti.atomic_add(self.params.energy_rest_rule[None], -self.state.mass_of(upper) * gain)
-                ti.atomic_add(self.params.rest_collisions[None], 1)
-                ti.atomic_add(self.params.supported_collisions[None], 1)
-        return done, dvi, dvj
 
     @ti.func
     def mark_touched(self, i):

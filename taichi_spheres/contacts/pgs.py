@@ -1,0 +1,117 @@
+"""Projected Gauss–Seidel sweeps of the contact solver (contacts/solver.py): one
+update per row, cells of one colour in parallel, colours in turn.
+
+Row update (Catto's sequential impulses, Moreau–Jean): with u_n the row's normal
+relative velocity (separating > 0), lambda = max(lambda + omega m_eff (target - u_n),
+0) and the change applied to both spheres (Rules.relaxation = omega, 1 by default).
+
+A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
+"""
+
+import taichi as ti
+
+#: modes of one sweep over the rows: apply the warm-start impulses, a velocity update,
+#: a position (pseudo-velocity) update
+WARM, VELOCITY, POSITION = 0, 1, 2
+
+
+class GaussSeidel:
+    """Row updates, sweeps over one colour's cells, and whole serial iterations."""
+
+    @ti.func
+    def inv_mass(self, i):
+        """1/m of sphere i [1/kg]."""
+        out = 1 / self.state.m0[None]
+        if ti.static(not self.f.equal_masses):
+            out = self.state.inv_mass_of(i)
+        return out
+
+    @ti.func
+    def push(self, field: ti.template(), a, b, n, impulse):
+        """Apply a normal impulse [N s] (or pseudo-impulse) to row (a, b)."""
+        field[a] += impulse * self.inv_mass(a) * n
+        if b >= 0:
+            field[b] -= impulse * self.inv_mass(b) * n
+
+    @ti.func
+    def solve_row(self, s, mode: ti.template()):
+        """Row s in one sweep: WARM applies its warm-start impulse (a pass of its own
+        before the iterations, so that every row starts from last step's impulses);
+        VELOCITY and POSITION make one projected Gauss-Seidel update. Returns the
+        velocity change it made [m/s] (0 for WARM)."""
+        out = ti.cast(0, self.real)
+        if ti.static(mode == WARM):
+            self.push(self.state.v, self.row_a[s], self.row_b[s], self.normal[s], self.lam[s])
+        elif ti.static(mode == POSITION):
+            out = self.update_row(s, self.w, self.mu, self.pos_target)
+        else:
+            out = self.update_row(s, self.state.v, self.lam, self.target)
+        return out
+
+    @ti.func
+    def update_row(self, s, field: ti.template(), acc: ti.template(), goal: ti.template()):
+        """Row s on velocities ``field`` with accumulated impulse ``acc`` and targets
+        ``goal``: lambda = max(lambda + m_eff (goal - u_n), 0), applying the change;
+        returns |change| / m_eff [m/s]."""
+        a = self.row_a[s]
+        b = self.row_b[s]
+        n = self.normal[s]
+        rel = field[a]
+        if b >= 0:
+            rel = rel - field[b]
+        meff = self.meff[s]
+        old = acc[s]
+        new = ti.max(old + ti.static(self.rules.relaxation) * meff * (goal[s] - rel.dot(n)), 0)
+        acc[s] = new
+        self.push(field, a, b, n, new - old)
+        return ti.abs(new - old) / meff
+
+    @ti.func
+    def sweep_cell(self, k, mode: ti.template()):
+        """Solve cell k's rows in order; the largest change goes to ``residual``."""
+        worst = ti.cast(0, self.real)
+        for s in range(self.cell_start[k], ti.min(self.cell_start[k + 1], ti.static(self.capacity))):
+            worst = ti.max(worst, self.solve_row(s, mode))
+        ti.atomic_max(self.residual[None], worst)
+
+    @ti.func
+    def sweep_colour(self, colour, mode: ti.template(), serial: ti.template()):
+        """One pass over the cells of one colour (disjoint blocks: no two threads touch a
+        sphere)."""
+        sx = self.colour_table[colour, 0]
+        sy = self.colour_table[colour, 1]
+        sz = self.colour_table[colour, 2]
+        ti.loop_config(serialize=serial)
+        for t in range(sx[2] * sy[2] * sz[2]):
+            iz = t % sz[2]
+            iy = (t // sz[2]) % sy[2]
+            ix = t // (sz[2] * sy[2])
+            c = ti.Vector([sx[0] + sx[1] * ix, sy[0] + sy[1] * iy, sz[0] + sz[1] * iz])
+            self.sweep_cell(self.grid.linear(c), mode)
+
+    @ti.func
+    def set_tolerances(self):
+        """This step's convergence tolerances (tol_v, tol_w) [m/s] (kernel top level)."""
+        self.tol_v[None] = ti.static(self.rules.contact_tolerance) * self.impact_speed()
+        self.tol_w[None] = self.tol_len[None] / self.params.h[None]
+
+    @ti.func
+    def warm_start_serially(self):
+        """Apply every row's warm-start impulse, colour by colour."""
+        for colour in range(self.n_colours_f[None]):
+            self.sweep_colour(colour, WARM, True)
+
+    @ti.func
+    def iterate_serially(self, mode: ti.template(), cap, tol: ti.template()):
+        """Sweeps over every colour until the residual is within tol[None] or cap sweeps
+        ran; returns the sweeps run."""
+        self.residual[None] = 0
+        for colour in range(self.n_colours_f[None]):
+            self.sweep_colour(colour, mode, True)
+        it = 1
+        while self.residual[None] > tol[None] and it < cap:
+            self.residual[None] = 0
+            for colour in range(self.n_colours_f[None]):
+                self.sweep_colour(colour, mode, True)
+            it += 1
+        return it

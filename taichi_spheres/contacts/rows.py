@@ -1,0 +1,206 @@
+"""Contact rows of the contact solver (contacts/solver.py): which pairs and walls get
+a row, in which order each owner cell sweeps them, and their geometry, targets and
+warm-start impulses.
+
+A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
+"""
+
+import taichi as ti
+
+from ..grid import FORWARD_ROWS
+
+
+class ContactRows:
+    """Gathering rows per owner cell (count, scan, place, sort), their geometry and
+    the warm start."""
+
+    @ti.func
+    def record(self, owner, a, b, fill: ti.template()):
+        """Count row (a, b) for its owner cell, or (fill) write it in the cell's range."""
+        if ti.static(not fill):
+            ti.atomic_add(self.cell_count[owner], 1)
+        else:
+            slot = self.cell_start[owner] + ti.atomic_add(self.cell_fill[owner], 1)
+            if slot < ti.static(self.capacity):
+                self.row_a[slot] = a
+                self.row_b[slot] = b
+
+    @ti.func
+    def consider_pair(self, i, xi, vi, ri, q, ci, fill: ti.template()):
+        """Row for pair (i, j = grid.order[q]) if closer than the margin and not an
+        impact to come (approaching at or above the pair's impact speed while still
+        apart: walls.Motion.pair_impact_speed)."""
+        j = self.grid.order[q]
+        d = self.pairs.min_image(xi - self.grid.xs[q])
+        sigma = ri + self.state.rad(j)
+        reach = sigma + self.margin[None]
+        dd = d.norm_sqr()
+        if dd < reach * reach and dd > 0:
+            dist = ti.sqrt(dd)
+            un = (vi - self.state.v[j]).dot(d) / dist
+            if dist < sigma or un >= -self.pairs.motion.pair_impact_speed(i, j):
+                cj = self.grid.coords(self.grid.cell_of[j])
+                owner = self.grid.linear(self.grid.owner(ci, cj))
+                self.record(owner, ti.min(i, j), ti.max(i, j), fill)
+
+    @ti.func
+    def consider_walls(self, i, xi, vi, ri, k, fill: ti.template()):
+        """Rows for sphere i (cell k) and the walls closer than the margin, unless it
+        moves into one at or above that wall's impact speed (walls.Motion
+        .wall_impact_speed: 0 for side walls and ceilings under gravity)."""
+        for a in ti.static(range(3)):
+            if ti.static(self.f.wall_axes[a]):
+                g_a = ti.cast(0, self.real)
+                if ti.static(self.f.gravity_axes[a]):
+                    g_a = self.params.gravity[None][a]
+                lo_gap = xi[a] - self.params.lo[None][a] - ri
+                hi_gap = self.params.hi[None][a] - xi[a] - ri
+                lo_imp = self.pairs.motion.wall_impact_speed(i, g_a)
+                hi_imp = self.pairs.motion.wall_impact_speed(i, -g_a)
+                if lo_gap < self.margin[None] and (lo_gap < 0 or -vi[a] <= lo_imp):
+                    self.record(k, i, -1 - 2 * a, fill)
+                if hi_gap < self.margin[None] and (hi_gap < 0 or vi[a] <= hi_imp):
+                    self.record(k, i, -2 - 2 * a, fill)
+
+    @ti.func
+    def gather_sphere(self, p, fill: ti.template()):
+        """Rows of the sphere at grid slot p: forward neighbours (grid.FORWARD_ROWS, each
+        pair once) and walls."""
+        i = self.grid.order[p]
+        k = self.grid.cell_of[i]
+        ci = self.grid.coords(k)
+        xi = self.grid.xs[p]
+        vi = self.state.v[i]
+        ri = self.state.rad(i)
+        for row in range(ti.static(len(FORWARD_ROWS))):
+            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.pairs.fwd_rows[row])
+            if row == 0:
+                a0 = p + 1
+            for q in range(a0, b0):
+                self.consider_pair(i, xi, vi, ri, q, ci, fill)
+            for q in range(a1, b1):
+                self.consider_pair(i, xi, vi, ri, q, ci, fill)
+        if ti.static(self.f.walls):
+            self.consider_walls(i, xi, vi, ri, k, fill)
+
+    @ti.func
+    def row_before(self, s, t):
+        """Row s comes before row t in a cell's sweep: pairs by (a, b), then wall rows
+        by (a, wall)."""
+        ws = self.row_b[s] < 0
+        wt = self.row_b[t] < 0
+        out = ws == False and wt == True  # noqa: E712 (Taichi expressions)
+        if ws == wt:
+            bs = self.row_b[s]
+            bt = self.row_b[t]
+            if ws:
+                bs = -bs
+                bt = -bt
+            out = self.row_a[s] < self.row_a[t] or (self.row_a[s] == self.row_a[t] and bs < bt)
+        return out
+
+    @ti.func
+    def sort_cell(self, k):
+        """Insertion sort of cell k's rows into row_before order (a few rows)."""
+        lo = self.cell_start[k]
+        for s in range(lo + 1, self.cell_start[k + 1]):
+            t = s
+            while t > lo:     # (Taichi's `and` does not short-circuit: test t first)
+                if not self.row_before(t, t - 1):
+                    break
+                a = self.row_a[t]
+                b = self.row_b[t]
+                self.row_a[t] = self.row_a[t - 1]
+                self.row_b[t] = self.row_b[t - 1]
+                self.row_a[t - 1] = a
+                self.row_b[t - 1] = b
+                t -= 1
+
+    @ti.func
+    def scan_cells(self):
+        """cell_start = exclusive prefix sum of cell_count; n_rows (serial: O(cells))."""
+        total = 0
+        ti.loop_config(serialize=True)
+        for k in range(self.grid.n_cells[None]):
+            self.cell_start[k] = total
+            total += self.cell_count[k]
+        self.cell_start[self.grid.n_cells[None]] = total
+        self.n_rows[None] = total
+
+    @ti.func
+    def gather(self):
+        """Count, place and sort the rows of the bound grid (kernel top level)."""
+        ti.loop_config(serialize=ti.static(self.serial))
+        for k in range(self.grid.n_cells[None]):
+            self.cell_count[k] = 0
+            self.cell_fill[k] = 0
+        ti.loop_config(serialize=ti.static(self.serial))
+        for p in range(self.state.n_spheres[None]):
+            self.gather_sphere(p, False)
+        self.scan_cells()
+        ti.loop_config(serialize=ti.static(self.serial))
+        for p in range(self.state.n_spheres[None]):
+            self.gather_sphere(p, True)
+        ti.loop_config(serialize=ti.static(self.serial))
+        for k in range(self.grid.n_cells[None]):
+            self.sort_cell(k)
+
+    @ti.func
+    def row_geometry(self, s):
+        """(normal, gap [m], effective mass [kg]) of row s at the current positions."""
+        a = self.row_a[s]
+        b = self.row_b[s]
+        n = ti.Vector.zero(self.real, 3)
+        gap = ti.cast(0, self.real)
+        meff = 1 / self.inv_mass(a)
+        if b >= 0:
+            d = self.pairs.min_image(self.state.x[a] - self.state.x[b])
+            dist = d.norm()
+            n = d / dist
+            gap = dist - self.state.rad(a) - self.state.rad(b)
+            meff = 1 / (self.inv_mass(a) + self.inv_mass(b))
+        else:
+            wall = -1 - b
+            side = wall % 2
+            r = self.state.rad(a)
+            for ax in ti.static(range(3)):
+                if ti.static(self.f.wall_axes[ax]):
+                    if wall // 2 == ax:
+                        if side == 0:
+                            n[ax] = 1
+                            gap = self.state.x[a][ax] - self.params.lo[None][ax] - r
+                        else:
+                            n[ax] = -1
+                            gap = self.params.hi[None][ax] - self.state.x[a][ax] - r
+        return n, gap, meff
+
+    @ti.func
+    def warm_lambda(self, a, b):
+        """Last step's impulse of row (a, b) [N s], scaled by h / h_prev; 0 if new."""
+        out = ti.cast(0, self.real)
+        kept = self.warm_n[a]
+        if kept <= ti.static(self.perf.warm_slots) and self.h_prev[None] > 0:
+            for t in range(kept):
+                if self.warm_key[a, t] == b:
+                    out = self.warm_lam[a, t] * (self.params.h[None] / self.h_prev[None])
+        return out
+
+    @ti.func
+    def prepare_rows(self):
+        """Geometry, targets and warm impulses of every row; v_pre (kernel top level)."""
+        h = self.params.h[None]
+        ti.loop_config(serialize=ti.static(self.serial))
+        for s in range(ti.min(self.n_rows[None], ti.static(self.capacity))):
+            n, gap, meff = self.row_geometry(s)
+            self.normal[s] = n
+            self.gap[s] = gap
+            self.meff[s] = meff
+            self.target[s] = -ti.max(gap, 0) / h
+            self.lam[s] = 0
+            if ti.static(self.rules.warm_start):
+                self.lam[s] = self.warm_lambda(self.row_a[s], self.row_b[s])
+        ti.loop_config(serialize=ti.static(self.serial))
+        for i in range(self.state.n_spheres[None]):
+            self.v_pre[i] = self.state.v[i]
+            self.x_pre[i] = self.state.x[i]
+            self.w[i] = ti.Vector.zero(self.real, 3)

@@ -1,0 +1,320 @@
+"""Contact solver for persistent contacts (step stage 5, docs/design.md "Persistent
+contacts"): Moreau–Jean nonsmooth contact dynamics solved by projected Gauss–Seidel,
+colour by colour, with warm starting and split-impulse position correction.
+
+After the drift and the impacts of a step (exact rewinds, contacts/pair.py), every
+pair closer than a speculative margin and every sphere closer than it to a wall
+becomes one *contact row* unless it approaches faster than the impact speed (a
+future impact). With ``x', v'`` the state after the impacts, ``n`` the contact
+normal, ``u_n`` the normal relative velocity (separating > 0), ``gap`` the distance
+between the surfaces (< 0: overlap):
+
+- velocity rows: impulses ``lambda >= 0`` with ``u_n(end) >= -max(gap, 0)/h``
+  (a touching contact stops approaching; a speculative one may close exactly its
+  gap in the next step), accumulated over projected Gauss–Seidel iterations and
+  clamped (Catto's sequential impulses), warm-started from the same pair's
+  lambda of the previous step (scaled by h / h_prev);
+- positions follow the trapezoidal rule of Moreau–Jean with theta = 1/2:
+  ``x += h/2 dv`` for the velocity change ``dv`` of the contact impulses. Free
+  flight stays exact (``dv = 0``) and a sphere resting under gravity, which the
+  drift moved down by ``g h^2/2`` at speed ``g h``, is put back exactly where it was
+  with zero velocity. Where that move would raise a sphere's potential energy by
+  more than the solve took from its kinetic energy (a speculative row slowing an
+  approach from above), it is shortened to the break-even length, so the energy of
+  a step never grows;
+- split impulse (Catto; Bullet): overlap left after that is removed by
+  pseudo-velocities ``w`` solved the same way (``w_n >= -gap/h``, no warm start),
+  which move positions (``x += h w``) and never change velocities. Pair
+  pseudo-impulses conserve sum m x, so they do not change potential energy.
+
+Parallel scheme: a contact is owned by the grid cell that owns the pair (the cell
+of the sphere for a wall row); cells of one colour have disjoint 2x2x2 blocks
+(grid.py), so one thread per cell sweeps its rows serially, in a fixed order
+(pairs by sphere ids, then wall rows: Box2D solves them last), with no races, and
+the result does not depend on the thread count. Iterations stop when no row
+changed a velocity by more than ``Rules.contact_tolerance`` x the impact speed
+(or the positions by more than a tenth of ``Rules.overlap_tolerance`` of the
+smallest diameter), at most ``Rules.contact_iterations`` / ``position_iterations``.
+
+A mixin-free class over the engine's state, grid, parameters and pair geometry.
+"""
+
+import numpy as np
+import taichi as ti
+
+from ..config import DEFAULT, Tuning
+from ..grid import Grid
+from ..params import StepParams
+from ..state import Features, SphereState
+from .pgs import POSITION, VELOCITY, WARM, GaussSeidel
+from .rows import ContactRows
+from .sweeps import MAX_COLOURS
+
+__all__ = ["ContactSolver"]
+
+
+
+@ti.data_oriented
+class ContactSolver(ContactRows, GaussSeidel):
+    """Contact rows and their projected Gauss–Seidel solve (module docstring).
+
+    Fields (K = contacts_per_sphere x capacity rows, M = cells, N = spheres):
+        row_a, row_b: (K,) i32 — the rows' spheres, a < b; b = -1 - wall for a wall
+            row (wall = 2 x axis + side, side 0 at lo and 1 at hi)
+        normal: (K,) vec3 — unit normal from b to a (into the box for a wall)
+        gap, target, pos_target: (K,) real — surface gap [m], velocity and
+            pseudo-velocity targets [m/s]
+        meff: (K,) real — effective mass of the row [kg]
+        lam, mu: (K,) real — accumulated impulse and pseudo-impulse [N s]
+        cell_count, cell_fill: (M,) i32, cell_start: (M+1,) i32 — rows per owner cell
+        v_pre, w: (N,) vec3 — velocities before the solve, pseudo-velocities [m/s]
+        x_pre: (N,) vec3 — positions before the solve [m]
+        warm_key, warm_lam: (N, warm_slots) — last step's rows keyed at their sphere
+            a: b and lambda; warm_n: (N,) i32 rows kept (more than warm_slots: none)
+        colour_table: (MAX_COLOURS, 3) vec3 i32 — (start, stride, count) per axis
+    """
+
+    def __init__(self, state: SphereState, grid: Grid, params: StepParams, pairs,
+                 features: Features, serial: bool, tuning: Tuning = DEFAULT,
+                 cpu: bool = True):
+        self.state, self.grid, self.params, self.pairs = state, grid, params, pairs
+        self.f = features
+        self.real = state.real
+        self.serial = serial
+        self.cpu = cpu
+        self.rules = tuning.physics
+        self.perf = tuning.performance
+        self.capacity = self.perf.contacts_per_sphere * state.capacity
+        self._allocate(state.capacity, grid.cell_capacity)
+        self._build_kernels()
+
+    def _allocate(self, cap: int, cells: int):
+        """The fields of the class docstring."""
+        real, k, slots = self.real, self.capacity, self.perf.warm_slots
+        self.row_a = ti.field(ti.i32, shape=k)
+        self.row_b = ti.field(ti.i32, shape=k)
+        self.normal = ti.Vector.field(3, real, shape=k)
+        self.gap = ti.field(real, shape=k)
+        self.target = ti.field(real, shape=k)
+        self.pos_target = ti.field(real, shape=k)
+        self.meff = ti.field(real, shape=k)
+        self.lam = ti.field(real, shape=k)
+        self.mu = ti.field(real, shape=k)
+        self.cell_count = ti.field(ti.i32, shape=cells)
+        self.cell_fill = ti.field(ti.i32, shape=cells)
+        self.cell_start = ti.field(ti.i32, shape=cells + 1)
+        self.v_pre = ti.Vector.field(3, real, shape=cap)
+        self.x_pre = ti.Vector.field(3, real, shape=cap)
+        self.w = ti.Vector.field(3, real, shape=cap)
+        self.warm_key = ti.field(ti.i32, shape=(cap, slots))
+        self.warm_lam = ti.field(real, shape=(cap, slots))
+        self.warm_n = ti.field(ti.i32, shape=cap)
+        self.colour_table = ti.Vector.field(3, ti.i32, shape=(MAX_COLOURS, 3))
+        self.n_colours = 0
+        self.margin = ti.field(real, shape=())       # speculative margin [m]
+        self.h_prev = ti.field(real, shape=())       # length of the last solved step [s]
+        self.residual = ti.field(real, shape=())     # largest change of the last sweep
+        self.n_rows = ti.field(ti.i32, shape=())
+        self.tol_v = ti.field(real, shape=())        # velocity tolerance of this step [m/s]
+        self.tol_w = ti.field(real, shape=())        # pseudo-velocity tolerance [m/s]
+        self.n_colours_f = ti.field(ti.i32, shape=())
+        self.tol_len = ti.field(real, shape=())      # position tolerance [m] (bind)
+
+    def bind(self, scene, geom):
+        """Load a scene's grid geometry ``geom`` (colours, margin: the grid's slack) and
+        forget the warm start."""
+        colours = geom.colours
+        table = np.zeros((MAX_COLOURS, 3, 3), dtype=np.int32)
+        table[:len(colours)] = np.array(colours, dtype=np.int32)
+        self.colour_table.from_numpy(table)
+        self.n_colours = len(colours)
+        self.n_colours_f[None] = len(colours)
+        # a tenth of the overlap tolerance of the smallest contact distance [m]
+        self.tol_len[None] = 0.1 * self.rules.overlap_tolerance * 2.0 * float(scene.radius.min())
+        self.margin[None] = geom.slack
+        self.h_prev[None] = 0
+        self.warm_n.fill(0)
+        self.state.loaded.fill(0)
+        self.n = scene.n
+
+    @ti.func
+    def impact_speed(self):
+        """Approach speed from which a contact is an impact [m/s] (PairRule.impact_speed)."""
+        return self.pairs.impact_speed()
+
+    @ti.func
+    def trapezoidal_move(self, i, h):
+        """x_i += h/2 (v_i - v_pre_i) (Moreau-Jean, theta = 1/2), shortened where it
+        would raise the sphere's potential energy by more than the solve took from
+        its kinetic energy (module docstring)."""
+        move = ti.cast(0.5, self.real) * h * (self.state.v[i] - self.v_pre[i])
+        if ti.static(self.f.gravity):
+            lift = -self.params.gravity[None].dot(move)
+            spent = ti.cast(0.5, self.real) * (self.v_pre[i].norm_sqr() - self.state.v[i].norm_sqr())
+            if lift > 0 and lift > spent:
+                move *= ti.max(spent, 0) / lift
+        self.state.x[i] += move
+
+    @ti.func
+    def position_targets(self):
+        """The trapezoidal move, then pseudo-velocity targets from the gaps it leaves
+        (kernel top level)."""
+        h = self.params.h[None]
+        ti.loop_config(serialize=ti.static(self.serial))
+        for i in range(self.state.n_spheres[None]):
+            self.trapezoidal_move(i, h)
+        ti.loop_config(serialize=ti.static(self.serial))
+        for s in range(ti.min(self.n_rows[None], ti.static(self.capacity))):
+            n, gap, meff = self.row_geometry(s)
+            self.normal[s] = n
+            self.gap[s] = gap
+            self.pos_target[s] = -gap / h
+            self.mu[s] = 0
+
+    @ti.func
+    def finish(self):
+        """x += h w; book the energy the solve removed (kinetic, and the potential energy
+        of its moves), the largest speed and overlap; keep the impulses for the next
+        step's warm start (kernel top level)."""
+        h = self.params.h[None]
+        self.params.vmax2[None] = 0      # measured again: the solve changed velocities
+        ti.loop_config(serialize=ti.static(self.serial))
+        for i in range(self.state.n_spheres[None]):
+            self.state.x[i] += h * self.w[i]
+            move = self.state.x[i] - self.x_pre[i]
+            loss = ti.cast(0.5, self.real) * (self.v_pre[i].norm_sqr() - self.state.v[i].norm_sqr())
+            if ti.static(self.f.gravity):
+                loss += self.params.gravity[None].dot(move)
+            if loss != 0:
+                ti.atomic_add(self.params.energy_contacts[None], self.state.mass_of(i) * loss)
+            ti.atomic_max(self.params.vmax2[None], self.state.v[i].norm_sqr())
+            self.warm_n[i] = 0
+            self.state.loaded[i] = 0
+        ti.loop_config(serialize=ti.static(self.serial))
+        for s in range(ti.min(self.n_rows[None], ti.static(self.capacity))):
+            a = self.row_a[s]
+            n, gap, meff = self.row_geometry(s)
+            sigma = 2 * self.state.rad(a)
+            if self.row_b[s] >= 0:
+                sigma = self.state.rad(a) + self.state.rad(self.row_b[s])
+            ti.atomic_max(self.params.contact_overlap[None], -gap / sigma)
+            if self.lam[s] > 0:
+                self.state.loaded[a] = 1
+                if self.row_b[s] >= 0:
+                    self.state.loaded[self.row_b[s]] = 1
+                t = ti.atomic_add(self.warm_n[a], 1)
+                if t < ti.static(self.perf.warm_slots):
+                    self.warm_key[a, t] = self.row_b[s]
+                    self.warm_lam[a, t] = self.lam[s]
+        self.h_prev[None] = h
+        self.params.contacts[None] = self.n_rows[None]
+
+    def _build_kernels(self):
+        """The kernels solve() launches (plain closures: no per-launch `self` dispatch)."""
+        rules = self.rules
+        params = self.params
+        real = self.real
+
+        @ti.kernel
+        def solve_serial():
+            self.set_tolerances()
+            self.gather()
+            self.prepare_rows()
+            self.warm_start_serially()
+            params.contact_iterations[None] = self.iterate_serially(
+                VELOCITY, ti.static(rules.contact_iterations), self.tol_v)
+            params.contact_residual[None] = self.residual[None]
+            self.position_targets()
+            params.position_iterations[None] = self.iterate_serially(
+                POSITION, ti.static(rules.position_iterations), self.tol_w)
+            self.finish()
+
+        @ti.kernel
+        def start() -> ti.i32:
+            self.set_tolerances()
+            self.gather()
+            self.prepare_rows()
+            return self.n_rows[None]
+
+        # one kernel per mode (a template argument costs Python dispatch per launch);
+        # the first colour of a sweep resets the residual, every launch returns it
+        @ti.kernel
+        def warm(colour: ti.i32):
+            self.sweep_colour(colour, WARM, False)
+
+        def sweep_kernel(mode):
+            @ti.kernel
+            def sweep(colour: ti.i32, first: ti.i32) -> real:
+                if first == 1:
+                    self.residual[None] = 0
+                self.sweep_colour(colour, mode, False)
+                return self.residual[None]
+            return sweep
+
+        @ti.kernel
+        def middle():
+            self.position_targets()
+
+        @ti.kernel
+        def end(iterations: ti.i32, positions: ti.i32):
+            params.contact_iterations[None] = iterations
+            params.position_iterations[None] = positions
+            self.finish()
+
+        self._solve_serial = solve_serial
+        self._start, self._middle, self._end = start, middle, end
+        self._warm = warm
+        self._sweeps = {mode: sweep_kernel(mode) for mode in (VELOCITY, POSITION)}
+
+    def solve(self) -> None:
+        """Gather the rows of the current state (grid freshly built) and solve them for a
+        step of length params.h; counters go to params (contacts, contact_iterations,
+        contact_residual, position_iterations, energy_contacts, contact_overlap). On
+        the CPU below Performance.serial_solver_below spheres the sweeps run serially
+        in one launch (a parallel launch per colour and sweep costs ~150 us there)."""
+        if self.serial or (self.cpu and self.n < self.perf.serial_solver_below):
+            self._solve_serial()      # the same sweeps in one launch: the same bits
+            return
+        self._start()
+        if self.rules.warm_start:
+            for colour in range(self.n_colours):
+                self._warm(colour)
+        iterations = self._iterate(VELOCITY, self.rules.contact_iterations, self.tol_v)
+        self.params.contact_residual[None] = self.residual[None]
+        self._middle()
+        positions = self._iterate(POSITION, self.rules.position_iterations, self.tol_w)
+        self._end(iterations, positions)
+
+    def _iterate(self, mode, cap, tol) -> int:
+        """iterate_serially with one parallel launch per colour (same sweeps, same bits)."""
+        limit = tol[None]
+        sweep = self._sweeps[mode]
+        it = 0
+        while it < cap:
+            for colour in range(self.n_colours):
+                residual = sweep(colour, int(colour == 0))
+            it += 1
+            if not residual > limit:
+                break
+        return it
+
+    def warm_rows(self, n: int) -> dict:
+        """The warm-start table of the first n spheres (numpy copies) and h_prev [s]."""
+        return dict(key=self.warm_key.to_numpy()[:n], lam=self.warm_lam.to_numpy()[:n],
+                    kept=self.warm_n.to_numpy()[:n], loaded=self.state.loaded.to_numpy()[:n],
+                    h_prev=float(self.h_prev[None]))
+
+    def load_warm(self, warm: dict) -> None:
+        """Load a table written by :meth:`warm_rows` (same precision and slots)."""
+        n = len(warm["kept"])
+        key = self.warm_key.to_numpy()
+        lam = self.warm_lam.to_numpy()
+        kept = self.warm_n.to_numpy()
+        loaded = self.state.loaded.to_numpy()
+        key[:n], lam[:n], kept[:n] = warm["key"], warm["lam"], warm["kept"]
+        loaded[:n] = warm["loaded"]
+        self.state.loaded.from_numpy(loaded)
+        self.warm_key.from_numpy(key)
+        self.warm_lam.from_numpy(lam)
+        self.warm_n.from_numpy(kept)
+        self.h_prev[None] = warm["h_prev"]

@@ -1,0 +1,207 @@
+"""The contact solver for persistent contacts (contacts/solver.py): resting columns and
+piles, energy, momentum, determinism, warm starting, impacts into resting spheres.
+
+Tolerances: overlaps relative to the diameter; speeds in m/s (f32 keeps about 7
+digits of a position of order 0.1 m, so its speed and energy floors are wider).
+"""
+import numpy as np
+import pytest
+
+import taichi_spheres as ts
+from taichi_spheres import observe
+from taichi_spheres.config import Tuning
+
+G = 9.81
+R = 0.01
+
+
+def _column(n, mass=None, gap=1e-4, e=0.5):
+    """n spheres of radius R stacked on the floor, gaps ``gap`` [m] apart."""
+    x = np.zeros((n, 3))
+    x[:, :2] = 0.05
+    x[:, 2] = R + (2 * R + gap) * np.arange(n)
+    return ts.Scene.from_arrays(x, np.zeros((n, 3)), np.full(n, R), mass=mass,
+                                box=((0, 0, 0), (0.1, 0.1, (2 * R + gap) * n + 0.1)),
+                                gravity=(0, 0, -G), restitution=e, wall_restitution=e)
+
+
+def _fcc_block(cells=5, spacing=1.0 + 1e-6, e=0.5):
+    """An FCC block of 4 cells^3 spheres (500 for 5), nearest neighbours ``spacing``
+    diameters apart, in a box that fits it on x and y (the layers sit in each other's
+    hollows: stable without friction), under gravity."""
+    a = 2 * np.sqrt(2) * R * spacing
+    base = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
+    idx = np.array(np.meshgrid(*[np.arange(cells)] * 3, indexing="ij")).reshape(3, -1).T
+    x = ((idx[:, None, :] + base[None]) * a).reshape(-1, 3) + R * (1 + 1e-6)
+    side = (cells - 0.5) * a + 2 * R * (1 + 1e-6)
+    hi = (side, side, cells * a + 0.1)
+    return ts.Scene.from_arrays(x, np.zeros_like(x), np.full(len(x), R),
+                                box=((0, 0, 0), hi), gravity=(0, 0, -G), restitution=e,
+                                wall_restitution=e)
+
+
+def _overlap(st, scene):
+    """Largest pair or wall overlap / diameter (brute force)."""
+    d = np.linalg.norm(st.x[:, None] - st.x[None], axis=-1)
+    s = st.radius[:, None] + st.radius[None]
+    np.fill_diagonal(d, np.inf)
+    worst = max(0.0, float(np.max((s - d) / s)))
+    lo = st.x - st.radius[:, None] - scene.box_lo
+    hi = scene.box_hi - st.x - st.radius[:, None]
+    return max(worst, float(-min(lo.min(), hi.min()) / (2 * st.radius.min())))
+
+
+def _energies_by_step(sim, steps):
+    """Total energy after each of ``steps`` steps [J]."""
+    out = [sim.energy_budget()["current"]]
+    for _ in range(steps):
+        sim.advance(sim.max_step())
+        out.append(sim.energy_budget()["current"])
+    return np.array(out)
+
+
+def _speed_floor(precision):
+    return 1e-6 if precision == "f64" else 1e-3
+
+
+@pytest.mark.parametrize("n", [20])
+def test_column_settles_without_overlap_or_drift(arch, precision, n):
+    sim = ts.Simulation(_column(n), arch=arch, precision=precision)
+    sim.advance(2.0)
+    st = sim.state()
+    assert _overlap(st, sim.scene) <= 1e-4
+    assert np.abs(st.v).max() <= _speed_floor(precision)
+    z = st.x[:, 2].copy()
+    sim.advance(10.0)                          # no drift over 10 s
+    assert np.abs(sim.state().x[:, 2] - z).max() <= 1e-4 * 2 * R
+    assert sim.stats["sweep_limit_hits"] == 0
+    assert sim.last_step["contact_residual"] <= \
+        sim.tuning.physics.contact_tolerance * sim.rest_speed
+
+
+def test_fcc_block_settles_and_holds(arch):
+    scene = _fcc_block()
+    sim = ts.Simulation(scene, arch=arch)
+    sim.advance(1.0)
+    st = sim.state()
+    assert _overlap(st, scene) <= 1e-4
+    assert np.abs(st.v).max() <= 1e-4
+    x = st.x.copy()
+    sim.advance(2.0)
+    st = sim.state()
+    assert np.abs(st.x - x).max() <= 1e-4 * 2 * R
+    assert np.abs(st.v).max() <= 1e-4
+    assert _overlap(st, scene) <= 1e-4
+    assert sim.stats["sweep_limit_hits"] == 0
+
+
+def test_energy_stays_below_the_start_and_is_booked(arch):
+    """Column landing from small gaps and an FCC block collapsing: at every step the
+    total energy is below the initial one, and every joule is booked (impacts and
+    contacts). (Step by step it can rise by the potential energy of an overlap the
+    split impulse removes: docs/algorithm.md.)"""
+    for scene in (_column(20), _fcc_block(4)):
+        sim = ts.Simulation(scene, arch=arch)
+        e = _energies_by_step(sim, 150)
+        assert e.max() <= e[0] * (1 + 1e-12)
+        assert e[-1] < e[0]
+        budget = sim.energy_budget()
+        assert budget["contacts"] > 0
+        assert abs(budget["unaccounted"]) <= 1e-9 * abs(budget["initial"])
+
+
+def test_solver_conserves_momentum_without_walls(arch):
+    """Two touching clusters drifting into each other slowly in a periodic box with a
+    rest speed and no gravity: impacts and contact rows keep momentum."""
+    rng = np.random.default_rng(4)
+    x = np.array([[0.05 + 2 * R * k, 0.1, 0.1] for k in range(6)])
+    v = np.zeros_like(x)
+    v[:3, 0] = 0.02
+    v[3:, 0] = -0.01
+    v += rng.normal(0, 1e-3, v.shape)
+    mass = rng.uniform(0.5, 2.0, len(x))
+    scene = ts.Scene.from_arrays(x, v, np.full(len(x), R), mass=mass,
+                                 box=((0, 0, 0), (0.3, 0.2, 0.2)), periodic=(True,) * 3,
+                                 gravity=(0, 0, 0), restitution=0.5, rest_speed=0.1)
+    sim = ts.Simulation(scene, arch=arch)
+    p0 = (mass[:, None] * v).sum(axis=0)
+    sim.advance(0.5)
+    st = sim.state()
+    assert sim.stats["contacts"] > 0
+    p1 = (st.mass[:, None] * st.v).sum(axis=0)
+    assert np.allclose(p1, p0, rtol=0, atol=1e-14)
+
+
+def test_serial_and_parallel_solver_give_the_same_bits(arch):
+    """The one-launch serial solver and the per-colour parallel launches (forced with
+    serial_heavy_below = serial_solver_below = 0) give the same state."""
+    scene = _fcc_block(4)
+    out = []
+    for below in (3000, 0):
+        sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(
+            serial_heavy_below=below, serial_solver_below=below))
+        sim.advance(0.3)
+        out.append(observe.state_digest(sim.state(), sim.precision))
+    assert out[0] == out[1]
+
+
+def test_warm_start_cuts_iterations(arch):
+    """Settled column of 20: velocity sweeps per step with warm start are at most 1/5
+    of those without."""
+    scene = _column(20)
+    its = {}
+    for warm in (True, False):
+        sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(warm_start=warm))
+        sim.advance(1.0)
+        before = sim.stats["contact_iterations"], sim.stats["contact_steps"]
+        sim.advance(0.5)
+        its[warm] = (sim.stats["contact_iterations"] - before[0]) / \
+            (sim.stats["contact_steps"] - before[1])
+    assert its[True] <= its[False] / 5
+
+
+def test_newtons_cradle_touching_at_rest(arch, precision):
+    """Five balls touching at rest, e = 1, struck by a sixth: the last leaves with the
+    striker's speed, the others stay at rest (to round-off)."""
+    n = 5
+    x = np.array([[0.2 + 2 * R * k, 0.1, 0.1] for k in range(n)] + [[0.1, 0.1, 0.1]])
+    v = np.zeros_like(x)
+    v[-1, 0] = 1.0
+    scene = ts.Scene.from_arrays(x, v, np.full(n + 1, R), box=((0, 0, 0), (0.6, 0.2, 0.2)),
+                                 gravity=(0, 0, 0), restitution=1.0)
+    sim = ts.Simulation(scene, arch=arch, precision=precision)
+    sim.advance(0.1)
+    st = sim.state()
+    tol = 1e-12 if precision == "f64" else 1e-5
+    assert st.v[n - 1, 0] == pytest.approx(1.0, abs=tol)
+    assert np.abs(st.v[:n - 1]).max() <= tol and abs(st.v[n, 0]) <= tol
+
+
+def test_heavy_ball_dropped_onto_a_settled_bed(arch):
+    """A ball 8x heavier dropped onto a settled FCC block: energy never grows, overlaps
+    stay within 1e-4 of a diameter, nothing passes through the floor, all comes to rest."""
+    scene = _fcc_block(4)
+    sim = ts.Simulation(scene, arch=arch)
+    sim.advance(1.0)
+    st = sim.state()
+    top = st.x[:, 2].max()
+    ball = [[st.x[:, 0].mean(), st.x[:, 1].mean(), top + 0.05]]
+    ball_at_start = [[ball[0][0], ball[0][1], scene.x[:, 2].max() + 0.05]]
+    mass = np.append(st.mass, 8 * st.mass[0])
+    # the scene from the lattice (settled spheres touch to round-off, which a scene
+    # refuses), then the settled state with set_state
+    bed = ts.Scene.from_arrays(np.vstack([scene.x, ball_at_start]), np.zeros((len(mass), 3)),
+                               np.full(len(mass), R), mass=mass,
+                               box=(scene.box_lo, scene.box_hi), gravity=(0, 0, -G),
+                               restitution=0.5, wall_restitution=0.5)
+    sim = ts.Simulation(bed, arch=arch)
+    sim.set_state(np.vstack([st.x, ball]), np.vstack([st.v, [[0.0, 0.0, -1.0]]]))
+    sim.initial_energy = sim.energy_budget()["current"]
+    e = _energies_by_step(sim, 200)
+    assert e.max() <= e[0] * (1 + 1e-12)
+    sim.advance(2.0)
+    st = sim.state()
+    assert _overlap(st, bed) <= 1e-4
+    assert st.x[:, 2].min() >= R * (1 - 1e-4)
+    assert np.abs(st.v).max() <= 1e-3
+    assert sim.stats["pair_collisions"] > 0 and sim.stats["contacts"] > 0

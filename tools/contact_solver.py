@@ -1,0 +1,208 @@
+#!/usr/bin/env python3
+"""Contact solver figures (contacts/solver.py): the pour scene in two phases, resting
+columns, warm starting, and a large lattice bed held on 1 and 2 threads.
+
+- pour: scenes/pour.toml (2,000 spheres, e = 0.5) on 1 thread: wall seconds per
+  simulated second over the fall [0, 1] s and the bed [1, 2] s (compile time
+  excluded: measured on a throw-away run first), the largest pair or wall overlap at
+  t = 2 s (brute force, / diameter), kinetic energy at 2 s / initial energy,
+  sweep-limit hits and unresolved overlaps in the bed phase, velocity and position
+  sweeps per step, the largest residual in the bed phase;
+- column: 20 equal spheres, and 20 with the upper half 10^3 times heavier, settling
+  on the floor for 3 s: largest speed, overlap, sweeps per step at the end;
+- warm start: the settled column's velocity sweeps per step with and without it;
+- bed: an FCC lattice block of --bed-n spheres resting in a box that fits it, held
+  for --bed-time s after 0.2 s of settling, on 1 and 2 threads (each in a child
+  process: Taichi fixes the thread count at start): wall s per simulated s,
+  largest speed and overlap.
+
+    python tools/contact_solver.py --write            # ~10 min on 2 cores
+    python tools/contact_solver.py --quick            # smaller, no write
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import taichi_spheres as ts  # noqa: E402
+from taichi_spheres.config import Tuning  # noqa: E402
+from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
+
+G = 9.81
+
+
+def max_overlap(st, scene, cell=None) -> float:
+    """Largest pair or wall overlap / diameter (pairs through a sorted sweep on x)."""
+    x, r = st.x, st.radius
+    order = np.argsort(x[:, 0])
+    xs, rs = x[order], r[order]
+    reach = 2 * r.max()
+    worst = 0.0
+    for k in range(len(xs)):
+        hi = np.searchsorted(xs[:, 0], xs[k, 0] + reach, side="right")
+        if hi > k + 1:
+            d = np.linalg.norm(xs[k + 1:hi] - xs[k], axis=1)
+            s = rs[k + 1:hi] + rs[k]
+            worst = max(worst, float(np.max((s - d) / s)))
+    lo = (x - r[:, None] - scene.box_lo).min()
+    hi = (scene.box_hi - x - r[:, None]).min()
+    return max(worst, float(-min(lo, hi) / (2 * r.min())))
+
+
+def window(sim, t_end):
+    """Advance to t_end; returns (wall s, counters over the window)."""
+    keys = ("steps", "sweep_limit_hits", "unresolved", "contact_iterations",
+            "position_iterations", "contact_steps", "pair_collisions", "wall_collisions")
+    before = {k: sim.stats[k] for k in keys}
+    t0 = time.perf_counter()
+    sim.advance_to(t_end)
+    wall = time.perf_counter() - t0
+    return wall, {k: sim.stats[k] - before[k] for k in keys}
+
+
+def pour(scene_path, t1, t2):
+    """The pour scene's two phases on this process's threads."""
+    scene = ts.load_scene(scene_path)
+    warm = ts.Simulation(scene)
+    warm.advance(0.01)                                   # compile
+    sim = ts.Simulation(scene)
+    fall, c_fall = window(sim, t1)
+    res_before = sim.stats["contact_residual"]
+    bed, c_bed = window(sim, t2)
+    st = sim.state()
+    ke = ts.observe.kinetic_energy(st)
+    return dict(fall=fall / t1, bed=bed / (t2 - t1), overlap=max_overlap(st, scene),
+                ke=ke, ke_rel=ke / sim.initial_energy, c_fall=c_fall, c_bed=c_bed,
+                residual=max(sim.stats["contact_residual"], res_before), t1=t1, t2=t2)
+
+
+def column(heavy: bool, seconds: float, warm_start=True):
+    """20 spheres r = 0.01 m on the floor, gaps 1e-4 m; the upper half 10^3 x heavier."""
+    n, r = 20, 0.01
+    x = np.zeros((n, 3))
+    x[:, :2] = 0.05
+    x[:, 2] = r + (2 * r + 1e-4) * np.arange(n)
+    mass = np.full(n, 4.19e-3)
+    if heavy:
+        mass[n // 2:] *= 1e3
+    scene = ts.Scene.from_arrays(x, np.zeros((n, 3)), np.full(n, r), mass=mass,
+                                 box=((0, 0, 0), (0.1, 0.1, 0.6)), gravity=(0, 0, -G),
+                                 restitution=0.5, wall_restitution=0.5)
+    sim = ts.Simulation(scene, tuning=Tuning().with_(warm_start=warm_start))
+    sim.advance(seconds - 0.5)
+    _, c = window(sim, seconds)
+    st = sim.state()
+    return dict(vmax=float(np.abs(st.v).max()), overlap=max_overlap(st, scene),
+                sweeps=c["contact_iterations"] / max(c["contact_steps"], 1),
+                positions=c["position_iterations"] / max(c["contact_steps"], 1))
+
+
+def fcc_bed(n_target: int):
+    """An FCC block of about n_target spheres (r = 0.01 m) in a box that fits it on x
+    and y, nearest neighbours 1 + 1e-6 diameters apart."""
+    r = 0.01
+    cells = max(1, round((n_target / 4) ** (1 / 3)))
+    a = 2 * np.sqrt(2) * r * (1 + 1e-6)
+    base = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
+    idx = np.array(np.meshgrid(*[np.arange(cells)] * 3, indexing="ij")).reshape(3, -1).T
+    x = ((idx[:, None, :] + base[None]) * a).reshape(-1, 3) + r * (1 + 1e-6)
+    side = (cells - 0.5) * a + 2 * r * (1 + 1e-6)
+    return ts.Scene.from_arrays(x, np.zeros_like(x), np.full(len(x), r),
+                                box=((0, 0, 0), (side, side, cells * a + 0.1)),
+                                gravity=(0, 0, -G), restitution=0.5, wall_restitution=0.5)
+
+
+def bed_child(n_target: int, hold: float) -> dict:
+    """Settle 0.2 s, then hold ``hold`` s (this process's threads)."""
+    scene = fcc_bed(n_target)
+    sim = ts.Simulation(scene)
+    sim.advance(0.2)
+    wall, c = window(sim, 0.2 + hold)
+    st = sim.state()
+    return dict(n=scene.n, wall_per_s=wall / hold, vmax=float(np.abs(st.v).max()),
+                overlap=max_overlap(st, scene),
+                sweeps=c["contact_iterations"] / max(c["contact_steps"], 1),
+                steps=c["steps"], residual=sim.stats["contact_residual"])
+
+
+def bed(n_target, hold, threads):
+    """bed_child in a child process with ``threads`` CPU threads."""
+    out = subprocess.run([sys.executable, __file__, "--child-bed", str(n_target), str(hold),
+                          "--threads", str(threads)], capture_output=True, text=True,
+                         check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def report(args, p, cols, warm, beds) -> str:
+    """The markdown section."""
+    cb = p["c_bed"]
+    steps = max(cb["contact_steps"], 1)
+    lines = [
+        "## Contact solver (persistent contacts)", "",
+        f"{datetime.date.today()}, {cpu_name()}, 1 thread for the pour and the columns; "
+        f"`python tools/contact_solver.py{' --quick' if args.quick else ''} --write`.", "",
+        f"Pour (`{args.scene}`): fall [0, {p['t1']:g}] s **{p['fall']:.1f}** wall s per "
+        f"simulated s, bed [{p['t1']:g}, {p['t2']:g}] s **{p['bed']:.2f}**; at "
+        f"{p['t2']:g} s overlap {p['overlap']:.2e} of a diameter, kinetic energy "
+        f"{p['ke']:.3g} J ({p['ke_rel']:.2e} of the initial energy); bed phase: "
+        f"{cb['sweep_limit_hits']} sweep-limit hits, {cb['unresolved']} unresolved, "
+        f"{cb['pair_collisions']} pair and {cb['wall_collisions']} wall impacts, "
+        f"{cb['contact_iterations'] / steps:.1f} velocity and "
+        f"{cb['position_iterations'] / steps:.1f} position sweeps per step, largest "
+        f"residual {p['residual']:.2e} m/s.", "",
+        "| column of 20 on the floor, 3 s | largest speed [m/s] | overlap / diameter | "
+        "velocity sweeps per step | position sweeps per step |", "|---|---|---|---|---|"]
+    for name, c in cols.items():
+        lines.append(f"| {name} | {c['vmax']:.2e} | {c['overlap']:.2e} | {c['sweeps']:.1f} | "
+                     f"{c['positions']:.1f} |")
+    lines += ["", f"Warm start, settled column of 20: {warm[True]:.1f} velocity sweeps per "
+              f"step with it, {warm[False]:.1f} without.", ""]
+    if beds:
+        lines += ["| FCC bed held | threads | wall s per simulated s | steps | velocity sweeps "
+                  "per step | largest speed [m/s] | overlap / diameter |",
+                  "|---|---|---|---|---|---|---|"]
+        for t, b in beds.items():
+            lines.append(f"| {b['n']} spheres | {t} | {b['wall_per_s']:.2f} | {b['steps']} | "
+                         f"{b['sweeps']:.1f} | {b['vmax']:.2e} | {b['overlap']:.2e} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--scene", default="scenes/pour.toml")
+    ap.add_argument("--phases", type=float, nargs=2, default=(1.0, 2.0))
+    ap.add_argument("--bed-n", type=int, default=100_000)
+    ap.add_argument("--bed-time", type=float, default=0.2)
+    ap.add_argument("--quick", action="store_true", help="0.3/0.6 s pour, 4,000-sphere bed")
+    ap.add_argument("--write", action="store_true", help="write into docs/bench.md")
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--child-bed", nargs=2, default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    ts.runtime.ensure("cpu", "f64", args.threads)
+    if args.child_bed:
+        print(json.dumps(bed_child(int(args.child_bed[0]), float(args.child_bed[1]))))
+        return 0
+    if args.quick:
+        args.phases, args.bed_n = (0.3, 0.6), 4000
+    os.chdir(ROOT)
+    p = pour(args.scene, *args.phases)
+    cols = {"equal masses": column(False, 3.0), "upper half 10^3 x heavier": column(True, 3.0)}
+    warm = {w: column(False, 3.0, warm_start=w)["sweeps"] for w in (True, False)}
+    beds = {t: bed(args.bed_n, args.bed_time, t) for t in (1, 2)}
+    publish(report(args, p, cols, warm, beds), "contact-solver", args.write and not args.quick)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
