@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import itertools
 import math
 import os
 import re
@@ -96,16 +97,41 @@ def load_scene(path) -> Scene:
 
 
 def scene_from_dict(data: dict, source="scene") -> Scene:
+    """A validated Scene from the tables of a parsed scene file ``data`` (what
+    tomllib.load returns; ``source`` names it in messages and anchors [initial] gsd).
+    Raises SceneFileError listing every problem found."""
     problems: list = []
+    tables = _settings_tables(data, problems)
+    groups = _sphere_groups(data, problems)
+    box, physics, initial = tables["box"], tables["physics"], tables["initial"]
+    _check_scene_wide(box, physics, initial, groups, problems)
+    meta = {"run": tables["run"], "physics": physics, "render": tables["render"],
+            "output": tables["output"], "source": source}
+    if "gsd" in initial and not problems:
+        return _scene_from_initial(initial, box, physics, data, meta, source)
+    arrays = _generated_arrays(groups, box, problems) if not problems else None
+    if problems:
+        raise SceneFileError(source, problems)
+    return _scene_from_groups(groups, arrays, box, physics, data, meta, source)
+
+
+def _settings_tables(data, problems) -> dict:
+    """The settings tables of a scene file by name (box, physics, run, render, output,
+    initial; {} when absent or not a table), after checking their keys, types and
+    the output and render values."""
     _check_table(data, _TOP, "", problems)
-    box = _table(data, "box", _BOX, problems)
-    physics = _table(data, "physics", _PHYSICS, problems)
-    run = _table(data, "run", _RUN, problems)
-    render = _table(data, "render", _RENDER, problems)
-    output = _table(data, "output", _OUTPUT, problems)
-    initial = _table(data, "initial", _INITIAL, problems)
-    _check_output(output, problems)
-    _check_render(render, run, problems)
+    tables = {key: _table(data, key, schema, problems) for key, schema in
+              (("box", _BOX), ("physics", _PHYSICS), ("run", _RUN), ("render", _RENDER),
+               ("output", _OUTPUT), ("initial", _INITIAL))}
+    _check_output(tables["output"], problems)
+    _check_render(tables["render"], tables["run"], problems)
+    return tables
+
+
+def _sphere_groups(data, problems) -> list:
+    """(kind, where, table) of every sphere table, in file order: [[spheres]],
+    [[lattice]], [[random]], then [[pour]] (where: e.g. 'lattice[0]'); each checked
+    for what needs no geometry."""
     groups = []
     for key, schema in (("spheres", _SPHERE), ("lattice", _LATTICE), ("random", _RANDOM),
                         ("pour", _POUR)):
@@ -120,8 +146,12 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
             _check_table(item, schema, where + ".", problems)
             _check_group(key, where, item, schema, problems)
             groups.append((key, where, item))
-    lo = box.get("lo", [0.0, 0.0, 0.0])
-    hi = box.get("hi", [1.0, 1.0, 1.0])
+    return groups
+
+
+def _check_scene_wide(box, physics, initial, groups, problems):
+    """Problems of the scene as a whole: precision, [box] and [physics] ranges,
+    [initial] against the sphere tables, and no spheres at all."""
     if "precision" in physics and physics["precision"] not in ("f32", "f64"):
         problems.append(f"physics.precision: must be \"f32\" or \"f64\", got {physics['precision']!r}")
     _check_values(box, physics, problems)
@@ -129,20 +159,30 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
     if not groups and "gsd" not in initial and not problems:
         problems.append("no spheres: add [[spheres]], [[lattice]], [[random]] or [[pour]] "
                         "tables, or [initial] gsd")
-    meta = {"run": run, "physics": physics, "render": render, "output": output,
-            "source": source}
-    if "gsd" in initial and not problems:
-        return _scene_from_initial(initial, box, physics, data, meta, source)
+
+
+def _generated_arrays(groups, box, problems) -> dict:
+    """Per-group lists of x (K, 3) [m], v (K, 3) [m/s], radius (K,) [m], mass (K,) [kg]
+    and group (K,) index arrays, generated in file order (so each group's random draws
+    come from its own seed); a group that cannot be generated adds a problem."""
+    lo = box.get("lo", [0.0, 0.0, 0.0])
+    hi = box.get("hi", [1.0, 1.0, 1.0])
     arrays = {"x": [], "v": [], "radius": [], "mass": [], "group": []}
-    if not problems:
-        for kind, where, item in groups:
-            try:
-                _generate(kind, where, item, lo, hi, arrays, problems,
-                          periodic=box.get("periodic", False))
-            except ValueError as exc:
-                problems.append(f"{where}: {exc}")
-    if problems:
-        raise SceneFileError(source, problems)
+    for kind, where, item in groups:
+        try:
+            _generate(kind, where, item, lo, hi, arrays, problems,
+                      periodic=box.get("periodic", False))
+        except ValueError as exc:
+            problems.append(f"{where}: {exc}")
+    return arrays
+
+
+def _scene_from_groups(groups, arrays, box, physics, data, meta, source) -> Scene:
+    """The Scene of the generated groups, with ``meta`` plus each sphere's group index,
+    the groups' colours ((G, 3), -1 where none is given) and names; a Scene error
+    (e.g. an overlap) names the group tables its spheres come from."""
+    lo = box.get("lo", [0.0, 0.0, 0.0])
+    hi = box.get("hi", [1.0, 1.0, 1.0])
     try:
         scene = Scene.from_arrays(
             np.concatenate(arrays["x"]), np.concatenate(arrays["v"]),
@@ -492,78 +532,90 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=Fals
 
 def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=200,
                      box=None, periodic=False):
-    """count non-overlapping centres of spheres inside [lo, hi]; radius is one number
-    or one per sphere (random sequential addition on a hash grid, largest first is
-    not needed: raises if the region is too full).
+    """count non-overlapping centres of spheres inside [lo, hi], (count, 3) [m]; radius
+    is one number or one per sphere [m] (random sequential addition on a hash grid,
+    largest first is not needed: raises if the region is too full).
 
-    box: (lo, hi) of the simulation box and periodic: bool or 3 bools; on periodic
-    axes spheres near one face are also kept clear of the images of spheres near the
-    opposite face (minimum image), as :class:`Scene` checks."""
-    periodic = (bool(periodic),) * 3 if isinstance(periodic, bool) else \
-        tuple(bool(p) for p in periodic)
-    if box is None:
-        periodic = (False, False, False)
-    else:
-        box_lo = np.asarray(box[0], dtype=np.float64)
-        box_hi = np.asarray(box[1], dtype=np.float64)
+    existing: (list of (K, 3) centres, list of (K,) radii) of spheres already placed,
+    kept clear of. box: (lo, hi) of the simulation box and periodic: bool or 3 bools;
+    on periodic axes spheres near one face are also kept clear of the images of
+    spheres near the opposite face (minimum image), as :class:`Scene` checks."""
     radii = np.broadcast_to(np.asarray(radius, dtype=np.float64), (count,))
     if np.any(hi - lo < 2.0 * radii.max()):
         raise ValueError("region too small for one sphere")
     prev_x = np.concatenate(list(existing[0])) if len(existing[0]) else np.zeros((0, 3))
     prev_r = np.concatenate(list(existing[1])) if len(existing[1]) else np.zeros(0)
     cell = 2.0 * max(radii.max(), prev_r.max() if prev_r.size else 0.0)
-    buckets: dict = {}
+    placed = _PlacedSpheres(cell, box, periodic)
+    for p, r in zip(prev_x, prev_r):
+        placed.add(p, r)
+    out = np.empty((count, 3))
+    for k in range(count):
+        out[k] = _place_one(radii[k], lo, hi, rng, placed, max_tries, k, count)
+    return out
 
-    def key(p):
-        return tuple(np.floor(p / cell).astype(np.int64))
 
-    def images(p):
+def _place_one(radius, lo, hi, rng, placed, max_tries, k, count):
+    """A centre [m] for sphere k of count, of ``radius`` [m], uniform in [lo + r, hi - r]
+    and clear of every sphere ``placed`` (it is added there): up to max_tries draws of
+    rng.random(3); ValueError when none is clear."""
+    for _ in range(max_tries):
+        p = lo + radius + rng.random(3) * (hi - lo - 2.0 * radius)
+        if not placed.overlaps(p, radius):
+            placed.add(p, radius)
+            return p
+    raise ValueError(f"could not place sphere {k} of {count} without overlap after "
+                     f"{max_tries} tries: the region is too full")
+
+
+class _PlacedSpheres:
+    """Spheres placed so far on a hash grid of cubic cells of side ``cell`` [m] (at
+    least the largest diameter, so only the 27 cells around a point can hold a sphere
+    overlapping one there). box: (lo, hi) of the simulation box or None (then no axis
+    is periodic); periodic: bool or 3 bools. A sphere near a periodic face is also
+    stored at its image one box length away."""
+
+    def __init__(self, cell, box, periodic):
+        self.cell = cell
+        self.periodic = (bool(periodic),) * 3 if isinstance(periodic, bool) else \
+            tuple(bool(p) for p in periodic)
+        if box is None:
+            self.periodic = (False, False, False)
+        else:
+            self.box_lo = np.asarray(box[0], dtype=np.float64)
+            self.box_hi = np.asarray(box[1], dtype=np.float64)
+        self.buckets: dict = {}
+
+    def key(self, p):
+        """Hash-grid cell (3 ints) of a point p [m]."""
+        return tuple(np.floor(p / self.cell).astype(np.int64))
+
+    def images(self, p):
         """p and, on periodic axes, its copies one box length away when p lies within
         one cell of a face (only those can come within reach of a sphere inside)."""
         shifts = [(0.0,)] * 3
         for a in range(3):
-            if periodic[a]:
-                size = box_hi[a] - box_lo[a]
+            if self.periodic[a]:
+                size = self.box_hi[a] - self.box_lo[a]
                 s = [0.0]
-                if p[a] - box_lo[a] < cell:
+                if p[a] - self.box_lo[a] < self.cell:
                     s.append(size)
-                if box_hi[a] - p[a] < cell:
+                if self.box_hi[a] - p[a] < self.cell:
                     s.append(-size)
                 shifts[a] = tuple(s)
         return [p + np.array((sx, sy, sz)) for sx in shifts[0] for sy in shifts[1]
                 for sz in shifts[2]]
 
-    def add(p, r):
-        for q in images(p):
-            buckets.setdefault(key(q), []).append((q, r))
+    def add(self, p, r):
+        """Store a sphere of radius r [m] at p [m] (and its periodic images)."""
+        for q in self.images(p):
+            self.buckets.setdefault(self.key(q), []).append((q, r))
 
-    for p, r in zip(prev_x, prev_r):
-        add(p, r)
-    out = np.empty((count, 3))
-    for k in range(count):
-        radius = radii[k]
-        for _ in range(max_tries):
-            p = lo + radius + rng.random(3) * (hi - lo - 2.0 * radius)
-            c = key(p)
-            ok = True
-            for dx in (-1, 0, 1):
-                for dy in (-1, 0, 1):
-                    for dz in (-1, 0, 1):
-                        for q, rq in buckets.get((c[0] + dx, c[1] + dy, c[2] + dz), ()):
-                            if np.sum((p - q) ** 2) < (radius + rq) ** 2:
-                                ok = False
-                                break
-                        if not ok:
-                            break
-                    if not ok:
-                        break
-                if not ok:
-                    break
-            if ok:
-                out[k] = p
-                add(p, radius)
-                break
-        else:
-            raise ValueError(f"could not place sphere {k} of {count} without overlap after "
-                             f"{max_tries} tries: the region is too full")
-    return out
+    def overlaps(self, p, radius):
+        """Whether a sphere of ``radius`` [m] at p [m] would overlap a stored one."""
+        c = self.key(p)
+        for dx, dy, dz in itertools.product((-1, 0, 1), repeat=3):
+            for q, rq in self.buckets.get((c[0] + dx, c[1] + dy, c[2] + dz), ()):
+                if np.sum((p - q) ** 2) < (radius + rq) ** 2:
+                    return True
+        return False

@@ -24,12 +24,11 @@ def test_staged_step_is_the_step(arch, precision):
     sim = Simulation(_gas(), arch=arch, precision=precision)
     for _ in range(3):
         h = sim.max_step()
-        start, vmax2 = sim.state(), sim._vmax2
+        start = sim.checkpoint()
         times = dict.fromkeys(bench.STAGES, 0.0)
         sweeps = bench.staged_step(sim, h, times)
         staged = sim.state()
-        sim.set_state(start.x, start.v)
-        sim._vmax2 = vmax2
+        sim.restore(start)
         sim.step(h)
         assert np.array_equal(staged.x, sim.state().x)
         assert np.array_equal(staged.v, sim.state().v)

@@ -33,7 +33,6 @@ import taichi as ti  # noqa: E402
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres import runtime as ts_runtime  # noqa: E402
 from taichi_spheres.builders import gas  # noqa: E402
-from taichi_spheres.contacts import decode_status  # noqa: E402
 from taichi_spheres.state import Features  # noqa: E402
 import bench_report  # noqa: E402  (tools/bench_report.py)
 from machine import kept_sections  # noqa: E402  (tools/machine.py)
@@ -115,6 +114,13 @@ def _timed(times, stage, fn, *args):
     return out
 
 
+def _status(packed: int) -> tuple:
+    """(remaining, rebuild) of the i32 a detection or sweep kernel of
+    ``debug_view().contacts`` returns: 2 x remaining approaching overlaps + 1 when a
+    sphere moved past the grid's slack (contacts.Status, as Simulation.step reads it)."""
+    return packed >> 1, bool(packed & 1)
+
+
 def staged_step(sim, h, times) -> int:
     """One step of length h [s] run stage by stage with the kernels and the loop of
     Simulation.step, with ti.sync() after each stage; adds wall seconds per stage to
@@ -130,14 +136,14 @@ def staged_step(sim, h, times) -> int:
     ti.sync()
     _timed(times, "drift", drift)
     _timed(times, "grid", grid.build)
-    remaining, _ = decode_status(_timed(times, "detect", contacts.detect_all))
+    remaining, _ = _status(_timed(times, "detect", contacts.detect_all))
     sweeps = 0
     while remaining > 0 and sweeps < sim.max_sweeps:
-        remaining, far = decode_status(_timed(times, "sweeps", contacts.sweep, remaining))
+        remaining, far = _status(_timed(times, "sweeps", contacts.sweep, remaining))
         sweeps += 1
         if far:
             _timed(times, "grid", grid.build)
-            remaining, _ = decode_status(_timed(times, "detect", contacts.detect_all))
+            remaining, _ = _status(_timed(times, "detect", contacts.detect_all))
     _timed(times, "counters", params.read_back)
     return sweeps
 
@@ -163,14 +169,14 @@ def plain_block(sim, min_seconds, min_steps) -> dict:
     return out
 
 
-def _restore(sim, snapshot, vmax2):
-    """Put a Simulation back to a state() snapshot and its step bound (untimed). Its
-    near lists are dropped: a pass right after a restore would otherwise find lists
-    made at the same positions by the pass before it, fresher than a run ever has them,
-    so staged passes and the full steps compared with them all detect by a full scan."""
-    sim.set_state(snapshot.x, snapshot.v)
+def _restore(sim, snapshot):
+    """Put a Simulation back to a checkpoint() snapshot (state, step bound, counters;
+    untimed). Its near lists are dropped: a pass right after a restore would otherwise
+    find lists made at the same positions by the pass before it, fresher than a run
+    ever has them, so staged passes and the full steps compared with them all detect by
+    a full scan."""
+    sim.restore(snapshot)
     sim.debug_view().contacts.near_ready = False
-    sim._vmax2 = vmax2
     ti.sync()
 
 
@@ -181,10 +187,10 @@ def staged_block(sim, min_seconds, min_steps) -> dict:
     out = dict(steps=0, full=0.0, stages=dict.fromkeys(STAGES, 0.0))
     while out["steps"] < min_steps or out["full"] < min_seconds:
         h = sim.max_step()
-        snapshot, vmax2 = sim.state(), sim._vmax2
-        _restore(sim, snapshot, vmax2)
+        snapshot = sim.checkpoint()
+        _restore(sim, snapshot)
         staged_step(sim, h, out["stages"])
-        _restore(sim, snapshot, vmax2)
+        _restore(sim, snapshot)
         t0 = time.perf_counter()
         sim.step(h)
         ti.sync()
