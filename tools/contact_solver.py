@@ -8,11 +8,13 @@ columns, warm starting, and a large lattice bed held on 1 and 2 threads.
   t = 2 s (brute force, / diameter), kinetic energy at 2 s / initial energy,
   sweep-limit hits and unresolved overlaps in the bed phase, velocity and position
   sweeps per step, the largest residual in the bed phase;
-- column: 20 equal spheres, and 20 with the upper half 10^3 times heavier, settling
+- column: 20 equal spheres, and 20 with the upper half 10 and 10^3 times heavier, settling
   on the floor for 3 s: largest speed, overlap, sweeps per step at the end;
 - warm start: the settled column's velocity sweeps per step with and without it;
-- bed: an FCC lattice block of --bed-n spheres resting in a box that fits it, held
-  for --bed-time s after 0.2 s of settling, on 1 and 2 threads (each in a child
+- error against run time: the pour's bed phase again from its state at t1 with
+  velocity/position sweep caps 10, 30, 100 and 300;
+- bed: a flat FCC lattice block of --bed-n spheres (10 sphere layers) resting in a
+  box that fits it, held for --bed-time s after 0.5 s of settling, on 1 and 2 threads (each in a child
   process: Taichi fixes the thread count at start): wall s per simulated s,
   largest speed and overlap.
 
@@ -72,30 +74,50 @@ def window(sim, t_end):
 
 
 def pour(scene_path, t1, t2):
-    """The pour scene's two phases on this process's threads."""
+    """The pour scene's two phases on this process's threads; also returns the
+    checkpoint at t1 (for the iteration-cap table)."""
     scene = ts.load_scene(scene_path)
     warm = ts.Simulation(scene)
     warm.advance(0.01)                                   # compile
     sim = ts.Simulation(scene)
     fall, c_fall = window(sim, t1)
+    at_t1 = sim.checkpoint()
     res_before = sim.stats["contact_residual"]
     bed, c_bed = window(sim, t2)
     st = sim.state()
     ke = ts.observe.kinetic_energy(st)
     return dict(fall=fall / t1, bed=bed / (t2 - t1), overlap=max_overlap(st, scene),
                 ke=ke, ke_rel=ke / sim.initial_energy, c_fall=c_fall, c_bed=c_bed,
-                residual=max(sim.stats["contact_residual"], res_before), t1=t1, t2=t2)
+                residual=max(sim.stats["contact_residual"], res_before), t1=t1, t2=t2,
+                at_t1=at_t1, scene=scene)
 
 
-def column(heavy: bool, seconds: float, warm_start=True):
-    """20 spheres r = 0.01 m on the floor, gaps 1e-4 m; the upper half 10^3 x heavier."""
+def bed_with_caps(p, caps):
+    """The pour's bed phase again from its t1 checkpoint with each (velocity, position)
+    sweep cap: wall s per simulated s, overlap and kinetic energy at t2."""
+    out = {}
+    for vel, pos in caps:
+        tuning = Tuning().with_(contact_iterations=vel, position_iterations=pos)
+        sim = ts.Simulation(p["scene"], tuning=tuning)
+        sim.restore(p["at_t1"])
+        sim.advance(0.01)                                # compile
+        wall, _ = window(sim, p["t2"])
+        st = sim.state()
+        out[(vel, pos)] = dict(wall=wall / (p["t2"] - p["t1"] - 0.01),
+                               overlap=max_overlap(st, p["scene"]),
+                               ke=ts.observe.kinetic_energy(st))
+    return out
+
+
+def column(ratio: float, seconds: float, warm_start=True):
+    """20 spheres r = 0.01 m on the floor, gaps 1e-4 m; the upper half ``ratio`` x
+    heavier."""
     n, r = 20, 0.01
     x = np.zeros((n, 3))
     x[:, :2] = 0.05
     x[:, 2] = r + (2 * r + 1e-4) * np.arange(n)
     mass = np.full(n, 4.19e-3)
-    if heavy:
-        mass[n // 2:] *= 1e3
+    mass[n // 2:] *= ratio
     scene = ts.Scene.from_arrays(x, np.zeros((n, 3)), np.full(n, r), mass=mass,
                                  box=((0, 0, 0), (0.1, 0.1, 0.6)), gravity=(0, 0, -G),
                                  restitution=0.5, wall_restitution=0.5)
@@ -108,27 +130,29 @@ def column(heavy: bool, seconds: float, warm_start=True):
                 positions=c["position_iterations"] / max(c["contact_steps"], 1))
 
 
-def fcc_bed(n_target: int):
-    """An FCC block of about n_target spheres (r = 0.01 m) in a box that fits it on x
-    and y, nearest neighbours 1 + 1e-6 diameters apart."""
+def fcc_bed(n_target: int, layers: int = 5):
+    """A flat FCC block of about n_target spheres (r = 0.01 m), ``layers`` lattice cells
+    (2 x layers sphere layers) tall, in a box that fits it on x and y, nearest
+    neighbours 1 + 1e-6 diameters apart."""
     r = 0.01
-    cells = max(1, round((n_target / 4) ** (1 / 3)))
+    side_cells = max(1, round((n_target / (4 * layers)) ** 0.5))
+    cells = (side_cells, side_cells, layers)
     a = 2 * np.sqrt(2) * r * (1 + 1e-6)
     base = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
-    idx = np.array(np.meshgrid(*[np.arange(cells)] * 3, indexing="ij")).reshape(3, -1).T
+    idx = np.array(np.meshgrid(*[np.arange(c) for c in cells], indexing="ij")).reshape(3, -1).T
     x = ((idx[:, None, :] + base[None]) * a).reshape(-1, 3) + r * (1 + 1e-6)
-    side = (cells - 0.5) * a + 2 * r * (1 + 1e-6)
+    side = (side_cells - 0.5) * a + 2 * r * (1 + 1e-6)
     return ts.Scene.from_arrays(x, np.zeros_like(x), np.full(len(x), r),
-                                box=((0, 0, 0), (side, side, cells * a + 0.1)),
+                                box=((0, 0, 0), (side, side, layers * a + 0.1)),
                                 gravity=(0, 0, -G), restitution=0.5, wall_restitution=0.5)
 
 
-def bed_child(n_target: int, hold: float) -> dict:
-    """Settle 0.2 s, then hold ``hold`` s (this process's threads)."""
+def bed_child(n_target: int, hold: float, settle: float = 0.5) -> dict:
+    """Settle ``settle`` s, then hold ``hold`` s (this process's threads)."""
     scene = fcc_bed(n_target)
     sim = ts.Simulation(scene)
-    sim.advance(0.2)
-    wall, c = window(sim, 0.2 + hold)
+    sim.advance(settle)
+    wall, c = window(sim, settle + hold)
     st = sim.state()
     return dict(n=scene.n, wall_per_s=wall / hold, vmax=float(np.abs(st.v).max()),
                 overlap=max_overlap(st, scene),
@@ -144,7 +168,7 @@ def bed(n_target, hold, threads):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def report(args, p, cols, warm, beds) -> str:
+def report(args, p, cols, warm, beds, capped) -> str:
     """The markdown section."""
     cb = p["c_bed"]
     steps = max(cb["contact_steps"], 1)
@@ -167,7 +191,15 @@ def report(args, p, cols, warm, beds) -> str:
         lines.append(f"| {name} | {c['vmax']:.2e} | {c['overlap']:.2e} | {c['sweeps']:.1f} | "
                      f"{c['positions']:.1f} |")
     lines += ["", f"Warm start, settled column of 20: {warm[True]:.1f} velocity sweeps per "
-              f"step with it, {warm[False]:.1f} without.", ""]
+              f"step with it, {warm[False]:.1f} without.", "",
+              f"Error against run time, the pour's bed phase again from its t = {p['t1']:g} s "
+              "state with other sweep caps (Rules.contact_iterations, position_iterations):",
+              "", "| velocity / position sweeps at most | wall s per simulated s | overlap / "
+              f"diameter at {p['t2']:g} s | kinetic energy at {p['t2']:g} s [J] |",
+              "|---|---|---|---|"]
+    for (vel, pos), c in capped.items():
+        lines.append(f"| {vel} / {pos} | {c['wall']:.2f} | {c['overlap']:.2e} | {c['ke']:.2e} |")
+    lines.append("")
     if beds:
         lines += ["| FCC bed held | threads | wall s per simulated s | steps | velocity sweeps "
                   "per step | largest speed [m/s] | overlap / diameter |",
@@ -183,7 +215,7 @@ def main(argv=None):
     ap.add_argument("--scene", default="scenes/pour.toml")
     ap.add_argument("--phases", type=float, nargs=2, default=(1.0, 2.0))
     ap.add_argument("--bed-n", type=int, default=100_000)
-    ap.add_argument("--bed-time", type=float, default=0.2)
+    ap.add_argument("--bed-time", type=float, default=0.3)
     ap.add_argument("--quick", action="store_true", help="0.3/0.6 s pour, 4,000-sphere bed")
     ap.add_argument("--write", action="store_true", help="write into docs/bench.md")
     ap.add_argument("--threads", type=int, default=1)
@@ -197,10 +229,13 @@ def main(argv=None):
         args.phases, args.bed_n = (0.3, 0.6), 4000
     os.chdir(ROOT)
     p = pour(args.scene, *args.phases)
-    cols = {"equal masses": column(False, 3.0), "upper half 10^3 x heavier": column(True, 3.0)}
-    warm = {w: column(False, 3.0, warm_start=w)["sweeps"] for w in (True, False)}
+    cols = {"equal masses": column(1.0, 3.0), "upper half 10 x heavier": column(10.0, 3.0),
+            "upper half 10^3 x heavier": column(1e3, 3.0)}
+    warm = {w: column(1.0, 3.0, warm_start=w)["sweeps"] for w in (True, False)}
+    capped = bed_with_caps(p, [(10, 10), (30, 30), (100, 100), (300, 300)])
     beds = {t: bed(args.bed_n, args.bed_time, t) for t in (1, 2)}
-    publish(report(args, p, cols, warm, beds), "contact-solver", args.write and not args.quick)
+    publish(report(args, p, cols, warm, beds, capped), "contact-solver",
+            args.write and not args.quick)
     return 0
 
 

@@ -195,7 +195,8 @@ class ContactRows:
             self.normal[s] = n
             self.gap[s] = gap
             self.meff[s] = meff
-            self.target[s] = -ti.max(gap, 0) / h
+            # gaps within the position tolerance count as touching (no target noise)
+            self.target[s] = -ti.max(gap - self.tol_len[None], 0) / h
             self.lam[s] = 0
             if ti.static(self.rules.warm_start):
                 self.lam[s] = self.warm_lambda(self.row_a[s], self.row_b[s])

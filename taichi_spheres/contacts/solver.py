@@ -9,9 +9,11 @@ future impact). With ``x', v'`` the state after the impacts, ``n`` the contact
 normal, ``u_n`` the normal relative velocity (separating > 0), ``gap`` the distance
 between the surfaces (< 0: overlap):
 
-- velocity rows: impulses ``lambda >= 0`` with ``u_n(end) >= -max(gap, 0)/h``
+- velocity rows: impulses ``lambda >= 0`` with ``u_n(end) >= -max(gap - delta, 0)/h``
   (a touching contact stops approaching; a speculative one may close exactly its
-  gap in the next step), accumulated over projected Gauss–Seidel iterations and
+  gap in the next step; gaps below delta, a tenth of Rules.overlap_tolerance of the
+  smallest diameter, count as touching so that round-off in the gaps makes no
+  targets), accumulated over projected Gauss–Seidel iterations and
   clamped (Catto's sequential impulses), warm-started from the same pair's
   lambda of the previous step (scaled by h / h_prev);
 - positions follow the trapezoidal rule of Moreau–Jean with theta = 1/2:
