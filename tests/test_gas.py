@@ -130,8 +130,11 @@ def test_features_compiled_in_only_when_needed(arch):
     f = rich.features
     assert f.gravity_axes == (False, False, True) and f.wall_axes == (True, True, True)
     assert not f.equal_radii and not f.equal_masses and not f.elastic and not f.elastic_walls
-    assert rich._state.radius is not None and rich._state.inv_mass is not None
-    assert ts.Simulation(gas(100), arch=arch)._state.radius is None
+    state = rich.debug_view().state
+    assert state.radius is not None and state.inv_mass is not None
+    assert f.contacts and rich.debug_view().solver is not None and state.loaded is not None
+    other = ts.Simulation(gas(100), arch=arch).debug_view()
+    assert other.state.radius is None and other.solver is None and other.state.loaded is None
 
 
 def test_compiled_in_restitution_with_e_1_stays_elastic(arch):
