@@ -280,7 +280,7 @@ def cmd_info(scene: Scene, args):
           f"periodic {list(scene.periodic)}")
     print(f"gravity: {scene.gravity.tolist()} m/s^2, restitution {scene.restitution:g} "
           f"({scene.restitution_model}), wall restitution {scene.wall_restitution:g}, "
-          f"rest speed {rest_speed:.3g} m/s")
+          f"impact speed {rest_speed:.3g} m/s")
     print(f"run: duration {duration:g} s at {fps:g} fps; precision {precision}; "
           f"step_fraction {fraction:g}")
     print(f"grid: {geom.dims[0]}x{geom.dims[1]}x{geom.dims[2]} cells, {len(geom.colours)} colours")

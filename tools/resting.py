@@ -92,8 +92,8 @@ def run(scene, t_end, samples=12):
 def markdown(rows, command, total):
     out = ["# Resting contact\n",
            f"Generated {datetime.date.today().isoformat()} on {cpu_name()} (CPU backend, f64) "
-           f"by `{command}` in {total:.0f} s. Rules: docs/algorithm.md, "
-           f"\"Resting contact\".\n",
+           f"by `{command}` in {total:.0f} s. Method: docs/algorithm.md, "
+           f"\"Persistent contacts: the contact solver\".\n",
            "| case | N | t (s) | KE end / KE peak | KE end / (M g r) | max(E) − E0 (J) | E0 − E end (J) | "
            "max overlap / σ | floor / r | steps | sweeps/step | limit hits | projected steps "
            "| wall s |",
