@@ -37,14 +37,13 @@ VALUES = ("sep_overlap", "open_overlap", "vmax2", "moved", "energy_pair_restitut
 @ti.data_oriented
 class StepParams:
     """h [s]; gravity [m/s^2]; box lo/hi/size [m]; restitution e, e_wall; rest_speed
-    [m/s]: the scene's floor of the impact speed (contacts/solver.py; 0: none); up:
-    unit vector against gravity (zero without gravity); and the step's counters, one 0-d field per name of
+    [m/s]: the impact speed (simulation.rest_speed_for; 0: every approach is an
+    impact); and the step's counters, one 0-d field per name of
     COUNTS (i32) and VALUES (real): ``params.pair_collisions[None]``."""
 
     def __init__(self, real):
         self.real = real
         self.rest_speed = ti.field(real, shape=())
-        self.up = ti.Vector.field(3, real, shape=())
         self.h = ti.field(real, shape=())
         self.gravity = ti.Vector.field(3, real, shape=())
         self.lo = ti.Vector.field(3, real, shape=())
@@ -82,8 +81,6 @@ class StepParams:
         self.e[None] = scene.restitution
         self.e_wall[None] = scene.wall_restitution
         self.rest_speed[None] = rest_speed
-        g = float(np.linalg.norm(scene.gravity))
-        self.up[None] = (-scene.gravity / g).tolist() if g > 0 else [0.0, 0.0, 0.0]
 
     def read_back(self):
         """This step's counters as one namespace (attributes named as COUNTS and VALUES:

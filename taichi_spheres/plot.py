@@ -1,7 +1,8 @@
 """PNG plots of a run's diagnostics CSV (``taichi-spheres plot run.csv``).
 
 Three panels against simulated time [s]: the energies [J] (kinetic, potential, total,
-and the cumulative losses to pair restitution, wall restitution and the rest rule);
+and the cumulative losses to pair restitution, wall restitution, the collapse rule and
+the contact solver);
 pair and wall collisions per simulated second (from the cumulative counts, per frame
 interval); the largest overlap left after a step so far, as a fraction of the contact
 distance. Needs matplotlib (the ``plot`` extra), imported only here, with the Agg

@@ -1,10 +1,11 @@
-"""Overlap projection (step stage 4b): the safety net of resting contact and dense impacts.
+"""Overlap projection (step stage 4b): the safety net of dense impacts without a contact
+solver.
 
 The sweeps of :mod:`taichi_spheres.contacts` resolve approaching overlaps by rewinding
-them to contact. In dense piles hit by a stream, or when the sweep limit is reached,
-some overlaps can remain; left alone they would deepen step after step until spheres
-pass through each other. After the sweeps of a step that hit the sweep limit, or of
-any step in a scene with resting contact (gravity and the rest rule), every pair that overlaps by more than
+them to contact. When the sweep limit is reached some overlaps can remain; left alone
+they could deepen step after step until spheres pass through each other. After the
+sweeps of a step that hit the sweep limit, in a scene without a contact solver (with
+one, its split impulse removes overlap: contacts/solver.py), every pair that overlaps by more than
 ``tolerance`` x its contact distance is pushed apart along its line of centres
 (Jacobi iterations, so that no two threads write one sphere; relaxation 1/2, at most
 ``max_iterations`` per step). Each pair's push is split by inverse mass
