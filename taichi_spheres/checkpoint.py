@@ -25,6 +25,12 @@ def scene_digest(scene) -> str:
         h.update(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
     h.update(repr((scene.periodic, scene.restitution, scene.wall_restitution,
                    scene.restitution_model, scene.rest_speed)).encode())
+    if getattr(scene, "frictional", False) or getattr(scene, "geometry", ()) or \
+            getattr(scene, "sinks", ()):
+        h.update(np.ascontiguousarray(scene.omega, dtype=np.float64).tobytes())
+        h.update(repr((scene.friction, scene.wall_friction, scene.tangential_restitution,
+                       scene.rolling_friction, [g.packed().tolist() for g in scene.geometry],
+                       [(list(s.low), list(s.high), s.recycle) for s in scene.sinks])).encode())
     return h.hexdigest()
 
 
@@ -35,12 +41,13 @@ def save(path, sim, scene, frame, fps) -> None:
                 last_step=ck["last_step"], n=ck["n"], precision=ck["precision"],
                 step_fraction=ck["step_fraction"], max_sweeps=ck["max_sweeps"],
                 frame=int(frame), fps=float(fps), scene=scene_digest(scene))
-    arrays = dict(x=ck["x"], v=ck["v"])
+    arrays = dict(x=ck["x"], v=ck["v"], omega=ck["omega"], radius=ck["radius"],
+                  mass=ck["mass"], sphere_ids=ck["sphere_ids"])
     if ck.get("warm") is not None:
         # the contact solver's warm start: the next steps give the same bits
         meta["warm_h_prev"] = ck["warm"]["h_prev"]
-        arrays.update(warm_key=ck["warm"]["key"], warm_lam=ck["warm"]["lam"],
-                      warm_kept=ck["warm"]["kept"], warm_loaded=ck["warm"]["loaded"])
+        arrays.update({"warm_" + k: value for k, value in ck["warm"].items()
+                       if k != "h_prev"})
     tmp = path + ".tmp.npz"
     with hold_interrupts():
         np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays)
@@ -52,19 +59,19 @@ def load(path, sim, scene, fps) -> int:
     try:
         with np.load(path) as data:
             meta = json.loads(str(data["meta"]))
-            x, v = data["x"], data["v"]
+            arrays = {k: data[k] for k in ("x", "v", "omega", "radius", "mass", "sphere_ids")
+                      if k in data}
             warm = None
             if "warm_key" in data:
-                warm = dict(key=data["warm_key"], lam=data["warm_lam"],
-                            kept=data["warm_kept"], loaded=data["warm_loaded"],
-                            h_prev=meta["warm_h_prev"])
+                warm = {k[5:]: data[k] for k in data.files if k.startswith("warm_")}
+                warm["h_prev"] = meta["warm_h_prev"]
     except (OSError, KeyError, ValueError) as exc:
         raise ValueError(f"cannot read checkpoint {path}: {exc}") from None
     if meta["scene"] != scene_digest(scene):
         raise ValueError(f"checkpoint {path} was made from a different scene")
     if meta["fps"] != float(fps):
         raise ValueError(f"checkpoint {path} was made at {meta['fps']:g} fps, not {fps:g}")
-    sim.restore(dict(meta, x=x, v=v, warm=warm))
+    sim.restore(dict(meta, warm=warm, **arrays))
     return int(meta["frame"])
 
 

@@ -52,6 +52,16 @@ COMPILE_CHOICES = ("auto", "fast", "optimized")
 TAICHI_BANNER_ENV = "ENABLE_TAICHI_HEADER_PRINT"
 
 
+
+def _stack_padded(frames) -> np.ndarray:
+    """(F, N, 3) stack of per-frame (n_f, 3) arrays; frames with fewer spheres (a sink
+    took some out) are padded with NaN rows."""
+    n = max(len(f) for f in frames)
+    out = np.full((len(frames), n, 3), np.nan, dtype=frames[0].dtype)
+    for k, f in enumerate(frames):
+        out[k, :len(f)] = f
+    return out
+
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Appends "(default: X)" to an option's help unless the help already states its
     default or the option has none (None, False)."""
@@ -502,7 +512,7 @@ class RunOutputs:
         from . import checkpoint
         st = sim.state()
         t0 = time.perf_counter()
-        rgb = self.renderer.frame(st) if self.video is not None else None
+        rgb = self.renderer.frame(st, sim.sphere_ids) if self.video is not None else None
         with hold_interrupts():
             self.diag.write(frame, st, sim.stats)
             if self.settings.npz:
@@ -537,8 +547,8 @@ class RunOutputs:
             if self.trajectory is not None:
                 self.trajectory.close()
             if s.npz and self.snaps[0]:
-                np.savez_compressed(s.npz_path, x=np.stack(self.snaps[0]),
-                                    v=np.stack(self.snaps[1]), time=np.array(self.snaps[2]),
+                np.savez_compressed(s.npz_path, x=_stack_padded(self.snaps[0]),
+                                    v=_stack_padded(self.snaps[1]), time=np.array(self.snaps[2]),
                                     radius=self.scene.radius, mass=self.scene.mass)
             if self.renderer is not None:
                 self.renderer.close()

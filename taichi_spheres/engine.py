@@ -131,6 +131,11 @@ class Engine:
         self._fused = None
         self._occupant = None      # weakref to the Simulation bound last
 
+    def release(self, sim) -> None:
+        """Forget that ``sim`` is bound (its scene changed: the next bind loads it all)."""
+        if self.bound_to(sim):
+            self._occupant = None
+
     def fits(self, n: int, n_cells: int) -> bool:
         return n <= self.capacity and n_cells <= self.cell_capacity
 
@@ -145,16 +150,18 @@ class Engine:
     def bound_to(self, sim) -> bool:
         return self._occupant is not None and self._occupant() is sim
 
-    def bind(self, sim, x, v, geom: GridGeometry, rest_speed: float, warm=None) -> None:
+    def bind(self, sim, x, v, geom: GridGeometry, rest_speed: float, warm=None,
+             omega=None) -> None:
         """Make ``sim`` the Simulation these fields hold: park the previous one's
-        positions, velocities and contact impulses on the host (its ``_park``), then
-        load ``sim``'s scene, x, v [(n, 3)], grid geometry, rest speed [m/s] and the
-        contact solver's warm start (``warm``: ContactSolver.warm_rows, or None)."""
+        positions, velocities, spins and contact impulses on the host (its ``_park``),
+        then load ``sim``'s scene, x, v [(n, 3)], grid geometry, rest speed [m/s], the
+        contact solver's warm start (``warm``: ContactSolver.warm_rows, or None) and the
+        spins omega [(n, 3) rad/s, or None: zero]."""
         previous = self._occupant() if self._occupant is not None else None
         if previous is not None and previous is not sim:
             previous._park()
         scene = sim.scene
-        self.state.bind(scene, x, v)
+        self.state.bind(scene, x, v, omega)
         self.params.bind(scene, rest_speed)
         self.grid.bind(geom)
         self.contacts.bind(scene, geom)

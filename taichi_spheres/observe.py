@@ -8,12 +8,31 @@ import hashlib
 
 import numpy as np
 
-__all__ = ["kinetic_energy", "potential_energy", "momentum", "total_energy", "state_digest"]
+__all__ = ["kinetic_energy", "rotational_energy", "potential_energy", "momentum",
+           "angular_momentum", "total_energy", "state_digest"]
 
 
 def kinetic_energy(state) -> float:
     """sum_i m_i |v_i|^2 / 2 [J]."""
     return float(0.5 * np.sum(state.mass * np.einsum("ij,ij->i", state.v, state.v)))
+
+
+def rotational_energy(state) -> float:
+    """sum_i I_i |omega_i|^2 / 2 [J], I = 2/5 m r^2 (solid spheres); 0 without spin."""
+    omega = getattr(state, "omega", None)
+    if omega is None:
+        return 0.0
+    return float(0.2 * np.sum(state.mass * state.radius ** 2 * np.einsum("ij,ij->i", omega, omega)))
+
+
+def angular_momentum(state, origin=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """sum_i (x_i - origin) x m_i v_i + I_i omega_i, (3,) [kg m^2/s] (orbital and spin)."""
+    out = np.cross(state.x - np.asarray(origin, dtype=np.float64),
+                   state.mass[:, None] * state.v).sum(axis=0)
+    omega = getattr(state, "omega", None)
+    if omega is not None:
+        out = out + ((0.4 * state.mass * state.radius ** 2)[:, None] * omega).sum(axis=0)
+    return out
 
 
 def potential_energy(state, gravity) -> float:
@@ -22,7 +41,8 @@ def potential_energy(state, gravity) -> float:
 
 
 def total_energy(state, gravity) -> float:
-    return kinetic_energy(state) + potential_energy(state, gravity)
+    """Kinetic (translational and rotational) plus potential energy [J]."""
+    return kinetic_energy(state) + rotational_energy(state) + potential_energy(state, gravity)
 
 
 def momentum(state) -> np.ndarray:

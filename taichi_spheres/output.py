@@ -16,9 +16,10 @@ CSV_COLUMNS = ["frame", "time", "kinetic", "potential", "total", "px", "py", "pz
                "max_overlap", "unresolved", "dt", "sweep_limit_hits",
                "multi_collision_spheres", "collapse_collisions", "energy_pair_restitution",
                "energy_wall_restitution", "energy_collapse", "energy_contacts",
-               "projected_pairs", "contacts", "contact_iterations"]
+               "projected_pairs", "contacts", "contact_iterations", "discharged",
+               "discharged_mass", "rotational"]
 #: CSV columns copied from Simulation.stats as they are
-_STATS_COLUMNS = CSV_COLUMNS[8:]
+_STATS_COLUMNS = CSV_COLUMNS[8:-1]
 
 
 def check_writable(path: str) -> None:
@@ -80,10 +81,11 @@ class DiagnosticsWriter:
 
     def write(self, frame: int, state, stats: dict) -> dict:
         ke = observe.kinetic_energy(state)
+        rot = observe.rotational_energy(state)
         pe = observe.potential_energy(state, self.gravity)
         p = observe.momentum(state)
-        row = dict(frame=frame, time=state.time, kinetic=ke, potential=pe, total=ke + pe,
-                   px=p[0], py=p[1], pz=p[2])
+        row = dict(frame=frame, time=state.time, kinetic=ke, potential=pe,
+                   total=ke + rot + pe, px=p[0], py=p[1], pz=p[2], rotational=rot)
         row.update({c: stats[c] for c in _STATS_COLUMNS})
         with hold_interrupts():
             self._csv.writerow([_fmt(row[c]) for c in CSV_COLUMNS])

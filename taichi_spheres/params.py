@@ -13,15 +13,24 @@ import types
 import numpy as np
 import taichi as ti
 
+#: static geometry objects a scene may have (planes, cylinders, cones: geometry.py)
+MAX_GEOMETRY = 16
+#: numbers per geometry object (geometry.PACKED_WIDTH: kind, point, axis, r0, r1,
+#: length, inside, hole, restitution, friction)
+GEOMETRY_WIDTH = 14
+#: sinks a scene may have (geometry.Sink: regions that discharge spheres)
+MAX_SINKS = 8
+
 #: i32 counters of one step: approaching overlaps left by the last detection; pair and
 #: wall collisions (impacts); wall rest clamps (spheres put on a wall); spheres with
 #: more than one collision; pair collisions made perfectly inelastic by the collapse
 #: rule; of a fused step (fused.py) also: 1 if it ran the overlap projection, and the
 #: pairs the projection pushed; of the contact solver (contacts/solver.py): its rows,
-#: velocity sweeps and position sweeps.
+#: velocity sweeps and position sweeps; spheres whose centre is in a sink at the end
+#: of the drift (simulation.py removes them).
 COUNTS = ("remaining", "pair_collisions", "wall_collisions", "wall_rests",
           "multi_collision_spheres", "collapse_collisions", "projected", "projected_pairs",
-          "contacts", "contact_iterations", "position_iterations")
+          "contacts", "contact_iterations", "position_iterations", "in_sinks")
 #: real values of one step: max relative overlap of separating pairs, of approaching
 #: pairs in the last detection; max |v|^2 [m^2/s^2]; max distance moved since the grid
 #: was built [m]; energy removed by pair restitution, wall restitution, the collapse
@@ -38,8 +47,11 @@ VALUES = ("sep_overlap", "open_overlap", "vmax2", "moved", "energy_pair_restitut
 class StepParams:
     """h [s]; gravity [m/s^2]; box lo/hi/size [m]; restitution e, e_wall; rest_speed
     [m/s]: the impact speed (simulation.rest_speed_for; 0: every approach is an
-    impact); and the step's counters, one 0-d field per name of
-    COUNTS (i32) and VALUES (real): ``params.pair_collisions[None]``."""
+    impact); friction coefficients mu, mu_wall, mu_roll and beta_max (the sticking
+    bound of the tangential restitution: contacts/friction.py); the geometry table
+    geo (MAX_GEOMETRY, GEOMETRY_WIDTH) with n_geo objects (geometry.py's packed
+    rows); sink_lo, sink_hi (MAX_SINKS,) vec3 with n_sinks regions [m]; and the step's counters, one 0-d field per name of COUNTS (i32) and VALUES
+    (real): ``params.pair_collisions[None]``."""
 
     def __init__(self, real):
         self.real = real
@@ -51,6 +63,15 @@ class StepParams:
         self.size = ti.Vector.field(3, real, shape=())
         self.e = ti.field(real, shape=())
         self.e_wall = ti.field(real, shape=())
+        self.mu = ti.field(real, shape=())
+        self.mu_wall = ti.field(real, shape=())
+        self.mu_roll = ti.field(real, shape=())
+        self.beta_max = ti.field(real, shape=())
+        self.geo = ti.field(real, shape=(MAX_GEOMETRY, GEOMETRY_WIDTH))
+        self.n_geo = ti.field(ti.i32, shape=())
+        self.sink_lo = ti.Vector.field(3, real, shape=MAX_SINKS)
+        self.sink_hi = ti.Vector.field(3, real, shape=MAX_SINKS)
+        self.n_sinks = ti.field(ti.i32, shape=())
         self.counters = [ti.field(ti.i32, shape=()) for _ in COUNTS]
         self.values = [ti.field(real, shape=()) for _ in VALUES]
         for name, field in zip(COUNTS + VALUES, self.counters + self.values):
@@ -81,6 +102,36 @@ class StepParams:
         self.e[None] = scene.restitution
         self.e_wall[None] = scene.wall_restitution
         self.rest_speed[None] = rest_speed
+        self.mu[None] = float(getattr(scene, "friction", 0.0))
+        self.mu_wall[None] = float(getattr(scene, "wall_friction", 0.0))
+        self.mu_roll[None] = float(getattr(scene, "rolling_friction", 0.0))
+        beta0 = float(getattr(scene, "tangential_restitution", -1.0))
+        self.beta_max[None] = 0.0 if beta0 == -1.0 else beta0
+        self.bind_geometry(getattr(scene, "geometry", ()))
+        self.bind_sinks(getattr(scene, "sinks", ()))
+
+    def bind_sinks(self, sinks):
+        """Load the scene's sink regions (low, high corners [m])."""
+        if len(sinks) > MAX_SINKS:
+            raise ValueError(f"at most {MAX_SINKS} sinks, got {len(sinks)}")
+        lo = np.zeros((MAX_SINKS, 3))
+        hi = np.zeros((MAX_SINKS, 3))
+        for k, sink in enumerate(sinks):
+            lo[k], hi[k] = sink.low, sink.high
+        dtype = self._value_host.dtype
+        self.sink_lo.from_numpy(lo.astype(dtype))
+        self.sink_hi.from_numpy(hi.astype(dtype))
+        self.n_sinks[None] = len(sinks)
+
+    def bind_geometry(self, geometry):
+        """Load the packed rows of the scene's geometry objects (geometry.py)."""
+        if len(geometry) > MAX_GEOMETRY:
+            raise ValueError(f"at most {MAX_GEOMETRY} geometry objects, got {len(geometry)}")
+        table = np.zeros((MAX_GEOMETRY, GEOMETRY_WIDTH), dtype=np.float64)
+        for k, g in enumerate(geometry):
+            table[k] = g.packed()
+        self.geo.from_numpy(table.astype(self._value_host.dtype))
+        self.n_geo[None] = len(geometry)
 
     def read_back(self):
         """This step's counters as one namespace (attributes named as COUNTS and VALUES:

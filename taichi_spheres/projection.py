@@ -146,7 +146,7 @@ class Projection:
             dx = self.push[i]
             if dx.norm_sqr() > 0:
                 self.state.x[i] += dx
-                self.motion.walls_and_wrap(i)
+                self.motion.contain(i)
 
     @ti.func
     def list_around(self, i):

@@ -40,6 +40,11 @@ def speed_colours(v: np.ndarray, vmax: float) -> np.ndarray:
     return ((1 - t) * cold + t * hot).astype(np.float32)
 
 
+def spin_colours(omega: np.ndarray, radius: np.ndarray, vmax: float) -> np.ndarray:
+    """Blue (no spin) to red (surface speed |omega| r >= vmax), (N, 3) float32."""
+    return speed_colours(np.asarray(omega) * np.asarray(radius)[:, None], vmax)
+
+
 def rgba(rgb: np.ndarray) -> np.ndarray:
     """(N, 3) RGB in [0, 1] -> (N, 4) float32 RGBA, opaque."""
     rgb = np.asarray(rgb, dtype=np.float32)
@@ -52,8 +57,11 @@ class Renderer:
     size: (width, height) in pixels, both divisible by 16 (H.264 macro blocks).
     camera: dict with optional 'position', 'lookat' (3 numbers, m) and 'fov' (deg);
     default: looking at the box centre from the front (-y), slightly above.
-    colours: 'group' (``colour_table``, (N, 3) RGB in [0, 1], default one colour) or
-    'speed' (blue to red).
+    colours: 'group' (``colour_table``, (N, 3) RGB in [0, 1], default one colour),
+    'speed' (blue to red) or 'spin' (by surface speed |omega| r, blue to red).
+    Spheres a sink took out (fewer rows in a State than in the scene) are not drawn;
+    ``frame(state, ids)`` keeps the colours of the remaining ones (ids: their indices
+    in the scene, Simulation.sphere_ids).
     """
 
     def __init__(self, scene, size=(640, 480), camera=None, colours="group", colour_table=None,
@@ -62,8 +70,8 @@ class Renderer:
         if width % 16 or height % 16 or width <= 0 or height <= 0:
             raise ValueError(f"size {width}x{height}: width and height must be positive "
                              f"multiples of 16")
-        if colours not in ("group", "speed"):
-            raise ValueError(f"colours must be 'group' or 'speed', got {colours!r}")
+        if colours not in ("group", "speed", "spin"):
+            raise ValueError(f"colours must be 'group', 'speed' or 'spin', got {colours!r}")
         self.size = (width, height)
         self.scene = scene
         self.colours = colours
@@ -86,7 +94,9 @@ class Renderer:
         self.col = ti.Vector.field(4, ti.f32, shape=n)
         self.rad.from_numpy(scene.radius.astype(np.float32))
         table = palette(np.zeros(n, dtype=np.int64)) if colour_table is None else colour_table
-        self.col.from_numpy(rgba(table))
+        self.table = np.asarray(table, dtype=np.float32)
+        self.col.from_numpy(rgba(self.table))
+        self._drawn = n
         self.edges = ti.Vector.field(3, ti.f32, shape=24)
         self.edges.from_numpy(_box_edges(scene.box_lo, scene.box_hi))
         lo, hi = scene.box_lo, scene.box_hi
@@ -102,13 +112,11 @@ class Renderer:
         self.light = (centre[0] - extent, lo[1] - 2.0 * extent, hi[2] + 2.0 * extent)
         self._vmax = None
 
-    def frame(self, state) -> np.ndarray:
-        """Render a State; returns an (height, width, 3) uint8 RGB image, row 0 at the top."""
-        self.pos.from_numpy(state.x.astype(np.float32))
-        if self.colours == "speed":
-            if self._vmax is None:   # fixed scale from the first frame: colours comparable
-                self._vmax = float(np.linalg.norm(state.v, axis=1).max()) or 1.0
-            self.col.from_numpy(rgba(speed_colours(state.v, self._vmax)))
+    def frame(self, state, ids=None) -> np.ndarray:
+        """Render a State (ids: the scene indices of its spheres, None: all of them);
+        returns an (height, width, 3) uint8 RGB image, row 0 at the top."""
+        self._load(state, ids)
+        self._draw_colours(state)
         self.canvas.set_background_color(self.background)
         self.gscene.set_camera(self.camera)
         self.gscene.ambient_light((0.35, 0.35, 0.35))
@@ -120,6 +128,41 @@ class Renderer:
         img = self.window.get_image_buffer_as_numpy()     # (width, height, 4), origin bottom-left
         rgb = np.ascontiguousarray(np.flipud(np.transpose(img[:, :, :3], (1, 0, 2))))
         return (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+    def _load(self, state, ids):
+        """Positions of the State's spheres; the others (discharged) get radius 0."""
+        n, m = self.scene.n, len(state.x)
+        pos = np.zeros((n, 3), dtype=np.float32)
+        pos[:m] = state.x
+        self.pos.from_numpy(pos)
+        if m != self._drawn:
+            ids = np.arange(m) if ids is None else np.asarray(ids)
+            rad = np.zeros(n, dtype=np.float32)
+            rad[:m] = self.scene.radius[ids]
+            self.rad.from_numpy(rad)
+            col = np.zeros((n, 3), dtype=np.float32)
+            col[:m] = self.table[ids]
+            self.col.from_numpy(rgba(col))
+            self._drawn = m
+
+    def _draw_colours(self, state):
+        """Speed or spin colours of this frame (scale fixed by the first frame)."""
+        if self.colours == "group":
+            return
+        if self.colours == "speed":
+            value = np.linalg.norm(state.v, axis=1)
+            rgb = speed_colours
+            args = (state.v,)
+        else:
+            value = np.linalg.norm(state.omega, axis=1) * state.radius
+            rgb = spin_colours
+            args = (state.omega, state.radius)
+        if self._vmax is None:   # fixed scale from the first frame: colours comparable
+            self._vmax = float(value.max()) if len(value) else 1.0
+            self._vmax = self._vmax or 1.0
+        col = np.zeros((self.scene.n, 3), dtype=np.float32)
+        col[:len(value)] = rgb(*args, self._vmax)
+        self.col.from_numpy(rgba(col))
 
     def close(self):
         try:

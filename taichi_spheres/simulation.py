@@ -16,6 +16,7 @@ One step of length h (docs/design.md, "One step, in parallel"):
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time as _time
 import types
@@ -29,7 +30,7 @@ from . import runtime
 from .config import DEFAULT, Performance, Tuning
 from .contacts import near_allowance
 from .grid import GridGeometry
-from . import observe, stepping
+from . import discharge, observe, stepping
 from .scene import Scene
 from .state import Features, State
 
@@ -54,13 +55,20 @@ def rest_speed_for(scene: Scene, step_fraction: float = DEFAULT_STEP_FRACTION,
     Rules.impact_factor x sqrt(2 |g| D), D = step_fraction x r_min: sqrt(2 g D) is
     the speed gravity adds in the longest step a resting scene takes (g h for h =
     sqrt(2 D / g)); the scene's ``rest_speed`` if larger; 0 (no contact solver)
-    without either, and always for elastic pairs (e = 1 stays exactly elastic)."""
-    if scene.restitution == 1.0:
+    without either, and always for elastic pairs without friction (e = 1 stays
+    exactly elastic)."""
+    if scene.restitution == 1.0 and not getattr(scene, "frictional", False):
         return 0.0
     g = float(np.linalg.norm(scene.gravity))
     speed = tuning.physics.impact_factor * \
         math.sqrt(2.0 * g * step_fraction * float(scene.radius.min()))
     return max(speed, float(scene.rest_speed or 0.0))
+
+
+def _scene_spins(scene: Scene) -> np.ndarray:
+    """The scene's initial spins (N, 3) [rad/s] (zeros when it gives none)."""
+    omega = getattr(scene, "omega", None)
+    return np.zeros_like(scene.v) if omega is None else omega
 
 
 def estimate_field_bytes(scene: Scene, precision: str = "f64",
@@ -164,7 +172,10 @@ class Simulation:
             self.features = Features(gravity_axes=(True, True, True),
                                      wall_axes=self.features.wall_axes, equal_radii=False,
                                      equal_masses=False, elastic=False, elastic_walls=False,
-                                     smid=self.features.smid, contacts=self.features.contacts)
+                                     smid=self.features.smid, contacts=self.features.contacts,
+                                     friction=self.features.friction,
+                                     rolling=self.features.rolling,
+                                     geometry=self.features.geometry)
         self.geometry = GridGeometry.for_scene(scene, step_fraction, self.tuning.performance)
         self.runtime = runtime.ensure(arch, precision, threads)
         self.precision = self.runtime.precision
@@ -175,7 +186,7 @@ class Simulation:
             self.tuning.performance)
         self._engine = engines.acquire(self._engine_key(self.schedule), scene.n,
                                        self.geometry.n_cells)
-        self._parked = (scene.x, scene.v)
+        self._parked = (scene.x, scene.v, _scene_spins(scene), None)
         self._bind()
         self._r_min = float(scene.radius.min())
         self._g = float(np.linalg.norm(scene.gravity))
@@ -188,7 +199,11 @@ class Simulation:
                             energy_contacts=0.0, virial=0.0, projected_steps=0,
                             projected_pairs=0, near_list_detections=0, contacts=0,
                             contact_iterations=0, position_iterations=0,
-                            contact_residual=0.0, contact_steps=0)
+                            contact_residual=0.0, contact_steps=0, discharged=0,
+                            discharged_mass=0.0, energy_discharged=0.0)
+        self._sink_rng = np.random.default_rng(12345)   # free spots of recycled spheres
+        #: scene indices of the spheres still simulated (sinks take some out)
+        self.sphere_ids = np.arange(scene.n)
         # how a step runs (stepping.py): kernel by kernel, or fused for small CPU systems
         self._stepper = stepping.Stepper(self, fused=self.schedule.fused)
         self.initial_energy = observe.total_energy(scene, scene.gravity)
@@ -245,28 +260,31 @@ class Simulation:
         contact_steps (steps it ran), contacts (rows, summed over steps),
         contact_iterations and position_iterations (velocity and split-impulse sweeps,
         summed), contact_residual (largest velocity change of a last sweep [m/s]); plus
-        time and dt."""
+        discharged, discharged_mass [kg], energy_discharged [J] (spheres that entered a
+        sink: discharge.py); plus time and dt."""
         out = dict(self._totals)
         out["time"] = self.time
         out["dt"] = self.last_step["h"]
         return out
 
     def energy_budget(self) -> dict:
-        """Where the energy went since the start [J]: initial, current (kinetic +
-        potential, potential -m g.x), kinetic, potential, the losses booked by pair
-        restitution, wall restitution, the collapse rule (impacts) and the contact
-        solver (``contacts``), and ``unaccounted`` = initial - current - booked losses
+        """Where the energy went since the start [J]: initial, current (kinetic with
+        rotational + potential, potential -m g.x), kinetic, potential, the losses booked
+        by pair restitution, wall restitution (impacts, their friction included), the
+        collapse rule and the contact solver (``contacts``), the energy the spheres took
+        into sinks (``discharged``), and ``unaccounted`` = initial - current - booked losses
         (round-off; or the energy of wall rests and of overlaps the projection moved)."""
         st = self.state()
-        ke = observe.kinetic_energy(st)
+        ke = observe.kinetic_energy(st) + observe.rotational_energy(st)
         pe = observe.potential_energy(st, self.scene.gravity)
         t = self._totals
         booked = (t["energy_pair_restitution"] + t["energy_wall_restitution"]
-                  + t["energy_collapse"] + t["energy_contacts"])
+                  + t["energy_collapse"] + t["energy_contacts"] + t["energy_discharged"])
         return dict(initial=self.initial_energy, current=ke + pe, kinetic=ke, potential=pe,
                     pair_restitution=t["energy_pair_restitution"],
                     wall_restitution=t["energy_wall_restitution"],
                     collapse=t["energy_collapse"], contacts=t["energy_contacts"],
+                    discharged=t["energy_discharged"],
                     unaccounted=self.initial_energy - (ke + pe) - booked)
 
     def state(self) -> State:
@@ -274,17 +292,18 @@ class Simulation:
         self._check()
         return State(x=self._engine.state.positions(), v=self._engine.state.velocities(),
                      radius=self.scene.radius.copy(), mass=self.scene.mass.copy(),
-                     time=self.time)
+                     time=self.time, omega=self._engine.state.spins())
 
-    def set_state(self, x, v, time=None):
-        """Overwrite positions and velocities (e.g. from a checkpoint); no validation
-        beyond shapes, the caller owns the physics."""
+    def set_state(self, x, v, time=None, omega=None):
+        """Overwrite positions, velocities and spins (omega [rad/s]; None: zero) (e.g.
+        from a checkpoint); no validation beyond shapes, the caller owns the physics."""
         self._check()
         x = np.asarray(x, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
-        if x.shape != (self.n, 3) or v.shape != (self.n, 3):
-            raise ValueError(f"x and v must have shape ({self.n}, 3)")
-        self._engine.state.load(x, v, self.scene.radius, self.scene.mass)
+        omega = np.zeros_like(v) if omega is None else np.asarray(omega, dtype=np.float64)
+        if x.shape != (self.n, 3) or v.shape != (self.n, 3) or omega.shape != (self.n, 3):
+            raise ValueError(f"x, v and omega must have shape ({self.n}, 3)")
+        self._engine.state.load(x, v, self.scene.radius, self.scene.mass, omega)
         if time is not None:
             self.time = float(time)
         self._measure_vmax()
@@ -292,7 +311,10 @@ class Simulation:
     def checkpoint(self) -> dict:
         """Everything needed to continue bit-for-bit: state, time, step bound, counters."""
         self._check()
-        return dict(x=self._engine.state.positions(), v=self._engine.state.velocities(), time=self.time,
+        return dict(x=self._engine.state.positions(), v=self._engine.state.velocities(),
+                    omega=self._engine.state.spins(), radius=self.scene.radius.copy(),
+                    mass=self.scene.mass.copy(), sphere_ids=self.sphere_ids.copy(),
+                    time=self.time,
                     vmax2=self._vmax2, totals=dict(self._totals),
                     last_step=dict(self.last_step), n=self.n, precision=self.precision,
                     step_fraction=self.step_fraction, max_sweeps=self.max_sweeps,
@@ -300,13 +322,16 @@ class Simulation:
 
     def restore(self, ckpt: dict) -> None:
         """Continue from :meth:`checkpoint` output of a Simulation of the same scene,
-        precision and settings (ValueError otherwise)."""
+        precision and settings (ValueError otherwise). A scene with sinks continues
+        with the spheres the checkpoint kept."""
+        if ckpt["n"] != self.n and getattr(self.scene, "sinks", ()) and "radius" in ckpt:
+            self._keep_spheres(ckpt)
         for key in ("n", "precision", "step_fraction", "max_sweeps"):
             mine = getattr(self, key)
             if ckpt[key] != mine:
                 raise ValueError(f"checkpoint {key} = {ckpt[key]!r} does not match this "
                                  f"simulation's {mine!r}")
-        self.set_state(ckpt["x"], ckpt["v"], ckpt["time"])
+        self.set_state(ckpt["x"], ckpt["v"], ckpt["time"], ckpt.get("omega"))
         self._vmax2 = float(ckpt["vmax2"])
         if ckpt.get("warm") is not None and self._engine.solver is not None:
             self._engine.solver.load_warm(ckpt["warm"])
@@ -350,6 +375,40 @@ class Simulation:
         self._check()
         c, sweeps, remaining, overlap = self._stepper.step(h, self.max_sweeps)
         self._book_step(c, h, sweeps, remaining, overlap)
+        if c.in_sinks > 0:
+            self._discharge()
+
+    def _keep_spheres(self, ckpt: dict) -> None:
+        """Continue with the spheres of a checkpoint taken after a discharge."""
+        self.scene = dataclasses.replace(
+            self.scene, x=np.asarray(ckpt["x"], dtype=np.float64),
+            v=np.asarray(ckpt["v"], dtype=np.float64),
+            radius=np.asarray(ckpt["radius"], dtype=np.float64),
+            mass=np.asarray(ckpt["mass"], dtype=np.float64),
+            omega=np.asarray(ckpt["omega"], dtype=np.float64))
+        self._parked = (self.scene.x, self.scene.v, self.scene.omega, None)
+        if "sphere_ids" in ckpt:
+            self.sphere_ids = np.asarray(ckpt["sphere_ids"])
+        self._engine.release(self)
+        self._bind()
+
+    def _discharge(self):
+        """Take the spheres in sinks out (discharge.py) and continue with the others on
+        the same engine (the fields are loaded again, warm start renumbered)."""
+        dtype = np.float64 if self.precision == "f64" else np.float32
+        scene, rows, warm, gone = discharge.discharge(
+            self.scene, self._engine.state.rows(), self._warm_rows(), dtype, self._sink_rng)
+        t = self._totals
+        t["discharged"] += gone.count
+        t["discharged_mass"] += gone.mass
+        t["energy_discharged"] += gone.energy
+        if gone.kept is not None:
+            self.sphere_ids = self.sphere_ids[gone.kept]
+        self.scene = scene
+        self._parked = rows + (warm,)
+        self._engine.release(self)
+        self._bind()
+        self._measure_vmax()
 
     #: stats totals that add up the step counter of the same name (params.COUNTS/VALUES)
     _SUMMED = ("pair_collisions", "wall_collisions", "wall_rests", "multi_collision_spheres",
@@ -392,15 +451,14 @@ class Simulation:
     def _bind(self):
         """Load this Simulation into its engine's fields unless it is the one they hold."""
         if not self._engine.bound_to(self):
-            x, v = self._parked[:2]
-            warm = self._parked[2] if len(self._parked) > 2 else None
-            self._engine.bind(self, x, v, self.geometry, self.rest_speed, warm)
+            x, v, omega, warm = self._parked
+            self._engine.bind(self, x, v, self.geometry, self.rest_speed, warm, omega)
             self._parked = None
 
     def _park(self):
         """Keep positions, velocities and the contact solver's warm start on the host:
         another Simulation takes the engine."""
-        self._parked = self._engine.state.rows() + (self._warm_rows(),)
+        self._parked = self._engine.state.rows() + (self._warm_rows(),)   # x, v, omega, warm
 
     def _warm_rows(self):
         """The contact solver's warm-start table (ContactSolver.warm_rows) or None."""

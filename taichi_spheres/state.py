@@ -29,12 +29,17 @@ class Features:
     elastic_walls: bool      # wall restitution == 1
     smid: bool = False       # pair restitution model "smid" (only with elastic False)
     contacts: bool = False   # contact solver for persistent contacts (inelastic pairs)
+    friction: bool = False   # a friction coefficient is non-zero: spin field, tangential impulses
+    rolling: bool = False    # rolling friction is non-zero (only with friction)
+    geometry: bool = False   # static geometry besides the box (planes, cylinders, cones)
+    sinks: bool = False      # regions that discharge spheres
 
     @classmethod
     def from_scene(cls, scene: Scene, rest_speed: float = 0.0) -> "Features":
         """rest_speed: the scene's floor of the impact speed [m/s]. The contact solver
         runs for inelastic pairs under gravity, or with a rest speed."""
         elastic = scene.restitution == 1.0
+        friction = bool(getattr(scene, "frictional", False))
         return cls(gravity_axes=tuple(bool(g != 0.0) for g in scene.gravity),
                    wall_axes=tuple(not p for p in scene.periodic),
                    equal_radii=bool(np.all(scene.radius == scene.radius[0])),
@@ -42,8 +47,12 @@ class Features:
                    elastic=elastic,
                    elastic_walls=scene.wall_restitution == 1.0,
                    smid=not elastic and scene.restitution_model == "smid",
-                   contacts=not elastic and (any(g != 0.0 for g in scene.gravity)
-                                             or rest_speed > 0))
+                   contacts=(not elastic or friction) and (any(g != 0.0 for g in scene.gravity)
+                                                           or rest_speed > 0),
+                   friction=friction,
+                   rolling=friction and float(getattr(scene, "rolling_friction", 0.0)) > 0,
+                   geometry=len(getattr(scene, "geometry", ())) > 0,
+                   sinks=len(getattr(scene, "sinks", ())) > 0)
 
     @property
     def gravity(self) -> bool:
@@ -76,6 +85,11 @@ class Features:
             "restitution model: " + ("smid" if self.smid else "normal"),
             "contact solver: " + ("on (persistent contacts, split impulse)"
                                   if self.contacts else "off (compiled out)"),
+            "friction and spin: " + (("on, with rolling friction" if self.rolling else "on")
+                                     if self.friction else "off (no spin field, compiled out)"),
+            "geometry: " + ("planes, cylinders, cones" if self.geometry
+                            else "box only (compiled out)"),
+            "sinks: " + ("on" if self.sinks else "none (compiled out)"),
         ]
 
 
@@ -83,7 +97,8 @@ class Features:
 class State:
     """Numpy copy of the simulation state at ``time`` (float64 whatever the precision).
 
-    x, v: (N, 3) [m], [m/s]; radius, mass: (N,) [m], [kg]; time [s].
+    x, v: (N, 3) [m], [m/s]; radius, mass: (N,) [m], [kg]; time [s]; omega: (N, 3)
+    angular velocity [rad/s] (zeros in a scene without friction).
     """
 
     x: np.ndarray
@@ -91,6 +106,11 @@ class State:
     radius: np.ndarray
     mass: np.ndarray
     time: float
+    omega: np.ndarray = None
+
+    def __post_init__(self):
+        if self.omega is None:
+            object.__setattr__(self, "omega", np.zeros_like(self.v))
 
 
 @ti.data_oriented
@@ -109,6 +129,7 @@ class SphereState:
         hits: (N,) i32 — pair and wall collisions in the current step
         loaded: (N,) i32, only with features.contacts — 1 when a contact row of the
             sphere carried an impulse in the last step (contacts/solver.py)
+        omega: (N,) vec3 real, only with features.friction — angular velocity [rad/s]
         n_spheres: () i32 — spheres of the bound scene
         r0, m0: () real — the radius [m] and mass [kg] of every sphere when equal
     """
@@ -125,6 +146,7 @@ class SphereState:
         self.moved = ti.field(real, shape=capacity)
         self.hits = ti.field(ti.i32, shape=capacity)
         self.loaded = ti.field(ti.i32, shape=capacity) if features.contacts else None
+        self.omega = ti.Vector.field(3, real, shape=capacity) if features.friction else None
         self.n_spheres = ti.field(ti.i32, shape=())
         self.r0 = ti.field(real, shape=())
         self.m0 = ti.field(real, shape=())
@@ -134,11 +156,14 @@ class SphereState:
         def load_rows(x: ti.types.ndarray(dtype=real, ndim=2),
                       v: ti.types.ndarray(dtype=real, ndim=2),
                       radius: ti.types.ndarray(dtype=real, ndim=1),
-                      inv_mass: ti.types.ndarray(dtype=real, ndim=1)):
+                      inv_mass: ti.types.ndarray(dtype=real, ndim=1),
+                      omega: ti.types.ndarray(dtype=real, ndim=2)):
             for i in range(self.n_spheres[None]):
                 for a in ti.static(range(3)):
                     self.x[i][a] = x[i, a]
                     self.v[i][a] = v[i, a]
+                    if ti.static(features.friction):
+                        self.omega[i][a] = omega[i, a]
                 if ti.static(not features.equal_radii):
                     self.radius[i] = radius[i]
                 if ti.static(not features.equal_masses):
@@ -146,41 +171,48 @@ class SphereState:
 
         @ti.kernel
         def read_rows(x: ti.types.ndarray(dtype=real, ndim=2),
-                      v: ti.types.ndarray(dtype=real, ndim=2)):
+                      v: ti.types.ndarray(dtype=real, ndim=2),
+                      omega: ti.types.ndarray(dtype=real, ndim=2)):
             for i in range(self.n_spheres[None]):
                 for a in ti.static(range(3)):
                     x[i, a] = self.x[i][a]
                     v[i, a] = self.v[i][a]
+                    if ti.static(features.friction):
+                        omega[i, a] = self.omega[i][a]
 
         self._np_real = np_real
         self._load_rows = load_rows
         self._read_rows = read_rows
 
-    def bind(self, scene: Scene, x, v):
+    def bind(self, scene: Scene, x, v, omega=None):
         """Make ``scene`` (at most ``capacity`` spheres) the one the fields hold: its
-        sphere count, equal radius and mass, radii and masses, and the positions x [m]
-        and velocities v [m/s] ((n, 3) each)."""
+        sphere count, equal radius and mass, radii and masses, and the positions x [m],
+        velocities v [m/s] and spins omega [rad/s] ((n, 3) each; None: zero)."""
         if scene.n > self.capacity:
             raise ValueError(f"{scene.n} spheres do not fit fields for {self.capacity}")
         self.n = scene.n
         self.n_spheres[None] = scene.n
         self.r0[None] = float(scene.radius[0])
         self.m0[None] = float(scene.mass[0])
-        self.load(x, v, scene.radius, scene.mass)
+        self.load(x, v, scene.radius, scene.mass, omega)
 
-    def load(self, x, v, radius, mass):
-        """Positions [m], velocities [m/s], radii [m] and masses [kg] of the bound scene's
-        spheres ((n, 3), (n, 3), (n,), (n,))."""
+    def load(self, x, v, radius, mass, omega=None):
+        """Positions [m], velocities [m/s], radii [m], masses [kg] and spins [rad/s] (None:
+        zero) of the bound scene's spheres ((n, 3), (n, 3), (n,), (n,), (n, 3))."""
         real = self._np_real
+        if omega is None:
+            omega = np.zeros((len(mass), 3))
         self._load_rows(np.ascontiguousarray(x, dtype=real), np.ascontiguousarray(v, dtype=real),
                         np.ascontiguousarray(radius, dtype=real),
-                        np.ascontiguousarray(1.0 / np.asarray(mass, dtype=np.float64), dtype=real))
+                        np.ascontiguousarray(1.0 / np.asarray(mass, dtype=np.float64), dtype=real),
+                        np.ascontiguousarray(omega, dtype=real))
 
     def _rows(self):
         x = np.empty((self.n, 3), dtype=self._np_real)
         v = np.empty((self.n, 3), dtype=self._np_real)
-        self._read_rows(x, v)
-        return x, v
+        omega = np.zeros((self.n, 3), dtype=self._np_real)
+        self._read_rows(x, v, omega)
+        return x, v, omega
 
     def positions(self) -> np.ndarray:
         """(n, 3) float64 copy of the bound scene's positions [m]."""
@@ -190,8 +222,13 @@ class SphereState:
         """(n, 3) float64 copy of the bound scene's velocities [m/s]."""
         return self._rows()[1].astype(np.float64)
 
+    def spins(self) -> np.ndarray:
+        """(n, 3) float64 copy of the bound scene's angular velocities [rad/s] (zeros
+        without friction)."""
+        return self._rows()[2].astype(np.float64)
+
     def rows(self):
-        """(x, v) of the bound scene in the field precision, (n, 3) each."""
+        """(x, v, omega) of the bound scene in the field precision, (n, 3) each."""
         return self._rows()
 
     @ti.func
@@ -206,6 +243,20 @@ class SphereState:
     def inv_mass_of(self, i):
         """1/m of sphere i [1/kg]; only called when masses differ."""
         return self.inv_mass[i]
+
+    @ti.func
+    def inv_inertia_of(self, i):
+        """1/I of sphere i, I = 2/5 m r^2 (solid sphere) [1/(kg m^2)]."""
+        r = self.rad(i)
+        return ti.cast(2.5, self.real) / (self.mass_of(i) * r * r)
+
+    @ti.func
+    def spin(self, i):
+        """Angular velocity of sphere i [rad/s] (zero without friction)."""
+        out = ti.Vector.zero(self.real, 3)
+        if ti.static(self.features.friction):
+            out = self.omega[i]
+        return out
 
     @ti.func
     def mass_of(self, i):

@@ -10,8 +10,9 @@ Frame layout (``gsd.hoomd``, schema ``hoomd``):
 - ``configuration/step``: steps taken since the start (``sim.stats["steps"]``).
 - ``particles/N``, ``position`` (m), ``velocity`` (m/s), ``diameter`` (m), ``mass`` (kg),
   ``types`` and ``typeid`` (:func:`particle_types`); ``moment_inertia`` and ``angmom``
-  when the state has an angular velocity ``omega``.
-- ``log/taichi_spheres/...`` (:data:`LOG_PREFIX`): ``time`` (s), ``kinetic_energy``,
+  when the state spins (a non-zero angular velocity ``omega``).
+- ``log/taichi_spheres/...`` (:data:`LOG_PREFIX`): ``time`` (s), ``kinetic_energy``
+  (translational and rotational),
   ``potential_energy``, ``total_energy`` (J), ``momentum`` (kg m/s, 3), the collision
   counters and booked energy losses of :attr:`Simulation.stats`, and the geometry
   needed to restore the scene's own coordinates: ``box_lo`` (m, 3) and ``periodic``
@@ -40,7 +41,7 @@ LOG_PREFIX = "taichi_spheres/"
 LOGGED_STATS = ("steps", "pair_collisions", "wall_collisions", "wall_rests", "sweeps",
                 "max_overlap", "unresolved", "collapse_collisions", "energy_pair_restitution",
                 "energy_wall_restitution", "energy_collapse", "energy_contacts", "virial",
-                "contacts", "contact_iterations")
+                "contacts", "contact_iterations", "discharged", "discharged_mass")
 #: scenes with at most this many distinct radii (and no groups) get one type per radius
 MAX_SIZE_TYPES = 16
 _GSD_PRECISION = {"f64": "double", "f32": "single"}
@@ -87,7 +88,7 @@ def _rotation(frame, state):
     """``moment_inertia`` (I = 2/5 m r^2 about every axis) and HOOMD's ``angmom``
     quaternion for identity orientations, 2 (0, I omega), when the state spins."""
     omega = getattr(state, "omega", None)
-    if omega is None:
+    if omega is None or not np.any(omega):
         return
     inertia = 0.4 * state.mass * state.radius ** 2
     frame.particles.moment_inertia = np.repeat(inertia[:, None], 3, axis=1)
@@ -98,7 +99,7 @@ def _rotation(frame, state):
 
 def _log(state, stats, scene) -> dict:
     """The ``log/`` entries of one frame (see the module docstring)."""
-    ke = observe.kinetic_energy(state)
+    ke = observe.kinetic_energy(state) + observe.rotational_energy(state)
     pe = observe.potential_energy(state, scene.gravity)
     log = {"time": np.array([state.time]), "kinetic_energy": np.array([ke]),
            "potential_energy": np.array([pe]), "total_energy": np.array([ke + pe]),
@@ -164,7 +165,11 @@ class GSDWriter:
         if self._file is None:
             self._open(_GSD_PRECISION.get(getattr(sim, "precision", "f64"), "double"))
             self._types = particle_types(sim.scene)
-        frame = make_frame(state, sim.stats, sim.scene, self._types)
+        names, typeid = self._types
+        ids = getattr(sim, "sphere_ids", None)     # spheres still in (sinks take some out)
+        if ids is not None and len(ids) != len(typeid):
+            typeid = typeid[ids]
+        frame = make_frame(state, sim.stats, sim.scene, (names, typeid))
         with hold_interrupts():
             self._file.append(frame)
             self._file.flush()

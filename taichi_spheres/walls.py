@@ -24,12 +24,14 @@ kinetic energy, counted in ``stats['wall_rests']``.
 import taichi as ti
 
 from .config import DEFAULT, Tuning
+from .contacts.friction import contact_velocity, spin_change, tangential_part, walton_impulse
 from .params import StepParams
 from .state import Features, SphereState
+from .surfaces import Surfaces
 
 
 @ti.data_oriented
-class Motion:
+class Motion(Surfaces):
     """Drift and wall kernels over a :class:`SphereState` (shapes: see SphereState)."""
 
     def __init__(self, state: SphereState, params: StepParams, features: Features,
@@ -85,6 +87,27 @@ class Motion:
                     if r >= 0 and w - acc * r < 0 and (s < 0 or r < s):
                         s = r
         return s
+
+    @ti.func
+    def count_in_sinks(self, i):
+        """Count sphere i in params.in_sinks if its centre is in a sink region."""
+        x = self.state.x[i]
+        inside = 0
+        for k in range(self.params.n_sinks[None]):
+            lo = self.params.sink_lo[k]
+            hi = self.params.sink_hi[k]
+            if (x >= lo).all():
+                if (x < hi).all():
+                    inside = 1
+        if inside == 1:
+            ti.atomic_add(self.params.in_sinks[None], 1)
+
+    @ti.func
+    def contain(self, i):
+        """walls_and_wrap, then the geometry objects (surfaces.py) for sphere i."""
+        self.walls_and_wrap(i)
+        if ti.static(self.f.geometry):
+            self.geometry_impacts(i)
 
     @ti.func
     def walls_and_wrap(self, i):
@@ -153,6 +176,10 @@ class Motion:
             va = v[a]
             if not last and s >= 0 and s <= 2 * h:
                 xa, va, moved = self.bounce(i, d, w, acc, s, side, lo_c, hi_c, e_w, moved)
+                if ti.static(self.f.friction):
+                    # normal speed change at contact: rebound + arrival speed
+                    jn = (va * side * -1 - acc * s) - (w - acc * s)
+                    x, v, moved = self.wall_friction(i, a, side, x, v, s, jn, r, moved)
             elif not last:
                 xa, va, moved = self.put_back(i, d, w, acc, side, lo_c, hi_c, e_w, moved, a)
             else:
@@ -168,6 +195,28 @@ class Motion:
             if last:
                 break
         return x, v, moved
+
+    @ti.func
+    def wall_friction(self, i, a: ti.template(), side, x, v, s, jn, r, moved):
+        """Tangential impulse of Walton's model (contacts/friction.py) for sphere i (radius
+        r [m]) that hit the wall of axis a (side -1: lo, 1: hi) s [s] ago with a normal
+        speed change jn [m/s] (its normal impulse / m): applied at contact and carried
+        forward (x += dv s), spin changed; returns x, v and moved. Books the energy
+        the friction took (params.energy_wall_restitution)."""
+        n = ti.Vector.zero(self.real, 3)
+        n[a] = -ti.cast(side, self.real)
+        vc = v
+        if ti.static(self.f.gravity):
+            vc = v - self.params.gravity[None] * s
+        ut = tangential_part(contact_velocity(vc, vc * 0, self.state.omega[i], vc * 0, r, r, n), n)
+        m = self.state.mass_of(i)
+        p = walton_impulse(ut, m * jn, m, self.params.mu_wall[None], self.params.beta_max[None])
+        dv = p / m
+        self.state.omega[i] += spin_change(r, self.state.inv_inertia_of(i), n, p)
+        after = ut + ti.cast(3.5, self.real) * dv
+        ti.atomic_add(self.params.energy_wall_restitution[None],
+                      ti.cast(1 / 7, self.real) * m * (ut.norm_sqr() - after.norm_sqr()))
+        return x + dv * s, v + dv, moved + dv.norm() * s
 
     @ti.func
     def persistent(self, i, w, acc, s):
@@ -292,7 +341,9 @@ class Motion:
                 self.state.v[i] += grav * h
             else:
                 self.state.x[i] += self.state.v[i] * h
-            self.walls_and_wrap(i)
+            self.contain(i)
+            if ti.static(self.f.sinks):
+                self.count_in_sinks(i)
             ti.atomic_max(self.params.vmax2[None], self.state.v[i].norm_sqr())
 
     @ti.func

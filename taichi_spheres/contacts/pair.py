@@ -19,6 +19,7 @@ A mixin of :class:`taichi_spheres.contacts.Contacts` (its fields and options).
 
 import taichi as ti
 
+from .friction import contact_velocity, spin_change, tangential_part, walton_impulse
 
 
 class PairRule:
@@ -130,8 +131,35 @@ class PairRule:
             e = ti.cast(1, self.real)
             if ti.static(not self.f.elastic):
                 e = self.params.e[None]
-            dvi, dvj = self.velocity_change(i, j, n, un, u, e, self.collapsing(i, j, e))
+            collapse = self.collapsing(i, j, e)
+            dvi, dvj = self.velocity_change(i, j, n, un, u, e, collapse)
+            if ti.static(self.f.friction):
+                e_n = e
+                if collapse:
+                    e_n = 0
+                dvi, dvj = self.impact_friction(i, j, n, u, -(1 + e_n) * un, dvi, dvj)
             self.apply_collision(i, j, dvi, dvj, s, rc)
+
+    @ti.func
+    def impact_friction(self, i, j, n, u, jn_speed, dvi, dvj):
+        """Add the tangential impulse of Walton's model (contacts/friction.py) to the
+        velocity changes dv_i, dv_j [m/s] of the impact of (i, j) with normal n and
+        relative velocity u before it, whose normal impulse is m_eff x jn_speed [N s];
+        change both spins and book the energy the friction took
+        (params.energy_pair_restitution)."""
+        wi, wj, meff = self.pair_weights(i, j)
+        ri = self.state.rad(i)
+        rj = self.state.rad(j)
+        ut = tangential_part(contact_velocity(u, u * 0, self.state.omega[i], self.state.omega[j],
+                                              ri, rj, n), n)
+        p = walton_impulse(ut, meff * jn_speed, meff, self.params.mu[None],
+                           self.params.beta_max[None])
+        self.state.omega[i] += spin_change(ri, self.state.inv_inertia_of(i), n, p)
+        self.state.omega[j] += spin_change(rj, self.state.inv_inertia_of(j), n, p)
+        after = ut + ti.cast(3.5, self.real) / meff * p
+        ti.atomic_add(self.params.energy_pair_restitution[None],
+                      ti.cast(1 / 7, self.real) * meff * (ut.norm_sqr() - after.norm_sqr()))
+        return dvi + wi / meff * p, dvj - wj / meff * p
 
     @ti.func
     def collapsing(self, i, j, e):

@@ -37,15 +37,20 @@ class GaussSeidel:
     def solve_row(self, s, mode: ti.template()):
         """Row s in one sweep: WARM applies its warm-start impulse (a pass of its own
         before the iterations, so that every row starts from last step's impulses);
-        VELOCITY and POSITION make one projected Gauss-Seidel update. Returns the
+        VELOCITY and POSITION make one projected Gauss-Seidel update (VELOCITY: with
+        friction, the friction rows first: contacts/friction_rows.py). Returns the
         velocity change it made [m/s] (0 for WARM)."""
         out = ti.cast(0, self.real)
         if ti.static(mode == WARM):
             self.push(self.state.v, self.row_a[s], self.row_b[s], self.normal[s], self.lam[s])
+            if ti.static(self.f.friction):
+                self.warm_friction(s)
         elif ti.static(mode == POSITION):
             out = self.update_row(s, self.w, self.mu, self.pos_target)
         else:
-            out = self.update_row(s, self.state.v, self.lam, self.target)
+            if ti.static(self.f.friction):
+                out = self.solve_friction(s)     # friction first, normal last
+            out = ti.max(out, self.update_row(s, self.state.v, self.lam, self.target))
         return out
 
     @ti.func

@@ -8,6 +8,8 @@ A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 import taichi as ti
 
 from ..grid import FORWARD_ROWS
+from .friction import tangential_part
+from .friction_rows import GEOMETRY_ROWS
 
 
 class ContactRows:
@@ -63,6 +65,20 @@ class ContactRows:
                     self.record(k, i, -2 - 2 * a, fill)
 
     @ti.func
+    def consider_geometry(self, i, xi, vi, ri, k, fill: ti.template()):
+        """Rows for sphere i (cell k) and the geometry objects closer than the margin,
+        unless it moves into one at or above the impact speed (surfaces.py)."""
+        motion = self.pairs.motion
+        for g in range(self.params.n_geo[None]):
+            gap, n = motion.surface_gap(g, xi, ri)
+            if gap < self.margin[None]:
+                acc = ti.cast(0, self.real)
+                if ti.static(self.f.gravity):
+                    acc = self.params.gravity[None].dot(n)
+                if gap < 0 or -vi.dot(n) <= motion.wall_impact_speed(i, acc):
+                    self.record(k, i, -1 - GEOMETRY_ROWS - g, fill)
+
+    @ti.func
     def gather_sphere(self, p, fill: ti.template()):
         """Rows of the sphere at grid slot p: forward neighbours (grid.FORWARD_ROWS, each
         pair once) and walls."""
@@ -82,6 +98,8 @@ class ContactRows:
                 self.consider_pair(i, xi, vi, ri, q, ci, fill)
         if ti.static(self.f.walls):
             self.consider_walls(i, xi, vi, ri, k, fill)
+        if ti.static(self.f.geometry):
+            self.consider_geometry(i, xi, vi, ri, k, fill)
 
     @ti.func
     def row_before(self, s, t):
@@ -159,6 +177,9 @@ class ContactRows:
             n = d / dist
             gap = dist - self.state.rad(a) - self.state.rad(b)
             meff = 1 / (self.inv_mass(a) + self.inv_mass(b))
+        elif -1 - b >= GEOMETRY_ROWS:
+            gap, n = self.pairs.motion.surface_gap(-1 - b - GEOMETRY_ROWS, self.state.x[a],
+                                                   self.state.rad(a))
         else:
             wall = -1 - b
             side = wall % 2
@@ -175,15 +196,33 @@ class ContactRows:
         return n, gap, meff
 
     @ti.func
-    def warm_lambda(self, a, b):
-        """Last step's impulse of row (a, b) [N s], scaled by h / h_prev; 0 if new."""
-        out = ti.cast(0, self.real)
+    def warm_slot(self, a, b):
+        """The slot of row (a, b) in sphere a's warm-start table, or -1 if it is new."""
+        out = -1
         kept = self.warm_n[a]
         if kept <= ti.static(self.perf.warm_slots) and self.h_prev[None] > 0:
             for t in range(kept):
                 if self.warm_key[a, t] == b:
-                    out = self.warm_lam[a, t] * (self.params.h[None] / self.h_prev[None])
+                    out = t
         return out
+
+    @ti.func
+    def warm_row(self, s):
+        """Start row s from last step's impulses of the same contact, scaled by h /
+        h_prev (normal; with friction the tangential impulse turned into the new tangent
+        plane and within the friction cone, and the rolling one likewise)."""
+        a = self.row_a[s]
+        t = self.warm_slot(a, self.row_b[s])
+        if t >= 0:
+            scale = self.params.h[None] / self.h_prev[None]
+            self.lam[s] = self.warm_lam[a, t] * scale
+            if ti.static(self.f.friction):
+                n = self.normal[s]
+                self.lam_t[s] = self.clamped(tangential_part(self.warm_t[a, t], n) * scale,
+                                             self.row_friction(s) * self.lam[s])
+                if ti.static(self.f.rolling):
+                    self.lam_r[s] = self.clamped(tangential_part(self.warm_r[a, t], n) * scale,
+                                                 self.rolling_limit(s))
 
     @ti.func
     def prepare_rows(self):
@@ -198,10 +237,16 @@ class ContactRows:
             # gaps within the position tolerance count as touching (no target noise)
             self.target[s] = -ti.max(gap - self.tol_len[None], 0) / h
             self.lam[s] = 0
+            if ti.static(self.f.friction):
+                self.lam_t[s] = ti.Vector.zero(self.real, 3)
+            if ti.static(self.f.rolling):
+                self.lam_r[s] = ti.Vector.zero(self.real, 3)
             if ti.static(self.rules.warm_start):
-                self.lam[s] = self.warm_lambda(self.row_a[s], self.row_b[s])
+                self.warm_row(s)
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.state.n_spheres[None]):
             self.v_pre[i] = self.state.v[i]
             self.x_pre[i] = self.state.x[i]
             self.w[i] = ti.Vector.zero(self.real, 3)
+            if ti.static(self.f.friction):
+                self.w_pre[i] = self.state.omega[i]

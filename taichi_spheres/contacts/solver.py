@@ -48,6 +48,7 @@ from ..config import DEFAULT, Tuning
 from ..grid import Grid
 from ..params import StepParams
 from ..state import Features, SphereState
+from .friction_rows import FrictionRows
 from .pgs import POSITION, VELOCITY, WARM, GaussSeidel
 from .rows import ContactRows
 from .sweeps import MAX_COLOURS
@@ -57,22 +58,29 @@ __all__ = ["ContactSolver"]
 
 
 @ti.data_oriented
-class ContactSolver(ContactRows, GaussSeidel):
+class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
     """Contact rows and their projected Gauss–Seidel solve (module docstring).
 
     Fields (K = contacts_per_sphere x capacity rows, M = cells, N = spheres):
         row_a, row_b: (K,) i32 — the rows' spheres, a < b; b = -1 - wall for a wall
-            row (wall = 2 x axis + side, side 0 at lo and 1 at hi)
-        normal: (K,) vec3 — unit normal from b to a (into the box for a wall)
+            row (wall = 2 x axis + side, side 0 at lo and 1 at hi; wall = 6 + k for
+            geometry object k: surfaces.py)
+        normal: (K,) vec3 — unit normal from b to a (into the box for a wall, from
+            the surface for geometry)
         gap, target, pos_target: (K,) real — surface gap [m], velocity and
             pseudo-velocity targets [m/s]
         meff: (K,) real — effective mass of the row [kg]
         lam, mu: (K,) real — accumulated impulse and pseudo-impulse [N s]
+        lam_t: (K,) vec3, only with friction — accumulated tangential impulse on a [N s]
+        lam_r: (K,) vec3, only with rolling friction — accumulated rolling angular
+            impulse on a [N m s]
         cell_count, cell_fill: (M,) i32, cell_start: (M+1,) i32 — rows per owner cell
         v_pre, w: (N,) vec3 — velocities before the solve, pseudo-velocities [m/s]
+        w_pre: (N,) vec3, only with friction — spins before the solve [rad/s]
         x_pre: (N,) vec3 — positions before the solve [m]
         warm_key, warm_lam: (N, warm_slots) — last step's rows keyed at their sphere
-            a: b and lambda; warm_n: (N,) i32 rows kept (more than warm_slots: none)
+            a: b and lambda; warm_n: (N,) i32 rows kept (more than warm_slots: none);
+            warm_t, warm_r: (N, warm_slots) vec3 — lam_t and lam_r of those rows
         colour_table: (MAX_COLOURS, 3) vec3 i32 — (start, stride, count) per axis
     """
 
@@ -111,6 +119,12 @@ class ContactSolver(ContactRows, GaussSeidel):
         self.warm_key = ti.field(ti.i32, shape=(cap, slots))
         self.warm_lam = ti.field(real, shape=(cap, slots))
         self.warm_n = ti.field(ti.i32, shape=cap)
+        friction, rolling = self.f.friction, self.f.rolling
+        self.lam_t = ti.Vector.field(3, real, shape=k) if friction else None
+        self.lam_r = ti.Vector.field(3, real, shape=k) if rolling else None
+        self.w_pre = ti.Vector.field(3, real, shape=cap) if friction else None
+        self.warm_t = ti.Vector.field(3, real, shape=(cap, slots)) if friction else None
+        self.warm_r = ti.Vector.field(3, real, shape=(cap, slots)) if rolling else None
         self.colour_table = ti.Vector.field(3, ti.i32, shape=(MAX_COLOURS, 3))
         self.n_colours = 0
         self.margin = ti.field(real, shape=())       # speculative margin [m]
@@ -187,6 +201,10 @@ class ContactSolver(ContactRows, GaussSeidel):
             loss = ti.cast(0.5, self.real) * (self.v_pre[i].norm_sqr() - self.state.v[i].norm_sqr())
             if ti.static(self.f.gravity):
                 loss += self.params.gravity[None].dot(move)
+            if ti.static(self.f.friction):
+                loss += ti.cast(0.5, self.real) / self.state.mass_of(i) * \
+                    (self.w_pre[i].norm_sqr() - self.state.omega[i].norm_sqr()) / \
+                    self.state.inv_inertia_of(i)
             if loss != 0:
                 ti.atomic_add(self.params.energy_contacts[None], self.state.mass_of(i) * loss)
             ti.atomic_max(self.params.vmax2[None], self.state.v[i].norm_sqr())
@@ -208,6 +226,10 @@ class ContactSolver(ContactRows, GaussSeidel):
                 if t < ti.static(self.perf.warm_slots):
                     self.warm_key[a, t] = self.row_b[s]
                     self.warm_lam[a, t] = self.lam[s]
+                    if ti.static(self.f.friction):
+                        self.warm_t[a, t] = self.lam_t[s]
+                    if ti.static(self.f.rolling):
+                        self.warm_r[a, t] = self.lam_r[s]
         self.h_prev[None] = h
         self.params.contacts[None] = self.n_rows[None]
 
@@ -302,9 +324,13 @@ class ContactSolver(ContactRows, GaussSeidel):
 
     def warm_rows(self, n: int) -> dict:
         """The warm-start table of the first n spheres (numpy copies) and h_prev [s]."""
-        return dict(key=self.warm_key.to_numpy()[:n], lam=self.warm_lam.to_numpy()[:n],
-                    kept=self.warm_n.to_numpy()[:n], loaded=self.state.loaded.to_numpy()[:n],
-                    h_prev=float(self.h_prev[None]))
+        out = dict(key=self.warm_key.to_numpy()[:n], lam=self.warm_lam.to_numpy()[:n],
+                   kept=self.warm_n.to_numpy()[:n], loaded=self.state.loaded.to_numpy()[:n],
+                   h_prev=float(self.h_prev[None]))
+        for name in ("warm_t", "warm_r"):
+            if getattr(self, name) is not None:
+                out[name] = getattr(self, name).to_numpy()[:n]
+        return out
 
     def load_warm(self, warm: dict) -> None:
         """Load a table written by :meth:`warm_rows` (same precision and slots)."""
@@ -320,3 +346,9 @@ class ContactSolver(ContactRows, GaussSeidel):
         self.warm_lam.from_numpy(lam)
         self.warm_n.from_numpy(kept)
         self.h_prev[None] = warm["h_prev"]
+        for name in ("warm_t", "warm_r"):
+            field = getattr(self, name)
+            if field is not None and name in warm:
+                table = field.to_numpy()
+                table[:n] = warm[name]
+                field.from_numpy(table)

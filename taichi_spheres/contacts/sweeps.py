@@ -196,7 +196,7 @@ class ColourSweeps:
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
         for t in range(self.n_touched[None]):
             i = self.touched[t]
-            self.motion.walls_and_wrap(i)
+            self.motion.contain(i)
             # a wall bounce moves the sphere too: fold it into the grid's move bound
             ti.atomic_max(self.params.moved[None], self.state.moved[i])
             self.grid.refresh(i)

@@ -1,0 +1,141 @@
+"""Friction rows of the contact solver (contacts/solver.py): Coulomb friction and rolling
+resistance of each persistent contact, solved in the same projected Gauss–Seidel sweep
+as its normal row, warm-started the same way (contacts/rows.py).
+
+Each contact row s (normal n, accumulated normal impulse lambda_n) carries
+- a tangential impulse lam_t (a vector in the contact's tangent plane: the two
+  tangential rows of the contact in one), updated towards zero tangential contact
+  velocity u_t (static friction): ``lam_t -= m_t u_t`` with the tangential effective
+  mass m_t = 2/7 m_eff (contacts/friction.py), then clamped to the friction disc
+  ``|lam_t| <= mu lambda_n`` (Coulomb; isotropic, so the result does not depend on a
+  choice of tangent axes);
+- with rolling friction mu_r, an angular impulse lam_r (tangent to the contact)
+  driving the relative rolling spin ``w_a - w_b`` (its tangential part) to zero,
+  clamped to ``|lam_r| <= mu_r r_eff lambda_n`` (r_eff = r_a r_b / (r_a + r_b), r_a
+  on a wall): the torque of a rolling resistance bounded by mu_r r_eff times the
+  normal force (Zhou et al. 1999's constant-torque model, in impulse form).
+Friction is solved before the normal row in each sweep (Box2D's order: the normal row,
+which prevents overlap, has the last word).
+
+A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
+"""
+
+import taichi as ti
+
+from .friction import TANGENTIAL_MASS, contact_velocity, spin_change, tangential_part
+
+#: wall rows 0..5 are the box's walls (2 x axis + side), from 6 on geometry objects
+GEOMETRY_ROWS = 6
+
+
+class FrictionRows:
+    """Tangential and rolling updates of one row, their coefficients and limits."""
+
+    @ti.func
+    def row_friction(self, s):
+        """Friction coefficient of row s: the pair value, the wall value, or the
+        geometry object's (params.geo column 13)."""
+        b = self.row_b[s]
+        out = self.params.mu[None]
+        if b < 0:
+            wall = -1 - b
+            out = self.params.mu_wall[None]
+            if wall >= GEOMETRY_ROWS:
+                out = self.params.geo[wall - GEOMETRY_ROWS, 13]
+        return out
+
+    @ti.func
+    def rolling_limit(self, s):
+        """mu_r r_eff lambda_n of row s [N m s]."""
+        a = self.row_a[s]
+        b = self.row_b[s]
+        r = self.state.rad(a)
+        if b >= 0:
+            rb = self.state.rad(b)
+            r = r * rb / (r + rb)
+        return self.params.mu_roll[None] * r * self.lam[s]
+
+    @ti.func
+    def clamped(self, vec, limit):
+        """vec scaled down to length limit (>= 0) if longer."""
+        size = vec.norm()
+        out = vec
+        if size > limit:
+            out = vec * (limit / size)
+        return out
+
+    @ti.func
+    def push_tangent(self, a, b, n, impulse):
+        """Apply a tangential impulse [N s] on a at the contact (-impulse on b)."""
+        self.state.v[a] += impulse * self.inv_mass(a)
+        self.state.omega[a] += spin_change(self.state.rad(a), self.state.inv_inertia_of(a),
+                                           n, impulse)
+        if b >= 0:
+            self.state.v[b] -= impulse * self.inv_mass(b)
+            self.state.omega[b] += spin_change(self.state.rad(b),
+                                               self.state.inv_inertia_of(b), n, impulse)
+
+    @ti.func
+    def push_rolling(self, a, b, impulse):
+        """Apply an angular impulse [N m s] on a (-impulse on b)."""
+        self.state.omega[a] += impulse * self.state.inv_inertia_of(a)
+        if b >= 0:
+            self.state.omega[b] -= impulse * self.state.inv_inertia_of(b)
+
+    @ti.func
+    def friction_row(self, s):
+        """One update of row s's tangential impulse; returns the change of the
+        tangential contact velocity it made [m/s]."""
+        a = self.row_a[s]
+        b = self.row_b[s]
+        n = self.normal[s]
+        vb = ti.Vector.zero(self.real, 3)
+        wb = ti.Vector.zero(self.real, 3)
+        rb = ti.cast(0, self.real)
+        if b >= 0:
+            vb = self.state.v[b]
+            wb = self.state.omega[b]
+            rb = self.state.rad(b)
+        ut = tangential_part(contact_velocity(self.state.v[a], vb, self.state.omega[a], wb,
+                                              self.state.rad(a), rb, n), n)
+        mt = ti.static(TANGENTIAL_MASS) * self.meff[s]
+        old = self.lam_t[s]
+        new = self.clamped(old - mt * ut, self.row_friction(s) * self.lam[s])
+        self.lam_t[s] = new
+        self.push_tangent(a, b, n, new - old)
+        return (new - old).norm() / mt
+
+    @ti.func
+    def rolling_row(self, s):
+        """One update of row s's rolling impulse; returns the change of the relative
+        rolling spin times r_a it made [m/s]."""
+        a = self.row_a[s]
+        b = self.row_b[s]
+        wrel = self.state.omega[a]
+        k = self.state.inv_inertia_of(a)
+        if b >= 0:
+            wrel = wrel - self.state.omega[b]
+            k += self.state.inv_inertia_of(b)
+        old = self.lam_r[s]
+        new = self.clamped(old - tangential_part(wrel, self.normal[s]) / k, self.rolling_limit(s))
+        self.lam_r[s] = new
+        self.push_rolling(a, b, new - old)
+        return (new - old).norm() * k * self.state.rad(a)
+
+    @ti.func
+    def warm_friction(self, s):
+        """Apply row s's warm-start tangential and rolling impulses."""
+        a = self.row_a[s]
+        b = self.row_b[s]
+        self.push_tangent(a, b, self.normal[s], self.lam_t[s])
+        if ti.static(self.f.rolling):
+            self.push_rolling(a, b, self.lam_r[s])
+
+    @ti.func
+    def solve_friction(self, s):
+        """Rolling then tangential update of row s (before its normal update); returns
+        the largest velocity change [m/s]."""
+        out = ti.cast(0, self.real)
+        if ti.static(self.f.rolling):
+            out = self.rolling_row(s)
+        return ti.max(out, self.friction_row(s))
