@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from . import geometry as geo
+
 __all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE", "RESTITUTION_MODELS", "MIN_STEP_ULPS",
            "OVERFLOW_HEADROOM", "largest_speed", "smallest_radius", "fall_speed",
            "speed_problem", "radius_problem", "mass_problem", "gravity_problem",
@@ -55,6 +57,13 @@ class Scene:
         rest_speed: approach speed [m/s] below which a pair collision is perfectly
             inelastic (e = 0; only with e < 1); None = automatic (see Simulation)
         name: free text used in output file names and logs.
+        friction, wall_friction: Coulomb coefficients mu >= 0 of pairs and of the box's
+            walls; tangential_restitution: Walton's beta0 in [-1, 1] (-1: Coulomb
+            friction without tangential elasticity; contacts/friction.py);
+            rolling_friction: mu_r >= 0 (rolling torque <= mu_r r_eff x normal force)
+        omega: (N, 3) angular velocities [rad/s] (zeros unless given)
+        geometry: tuple of ts.Plane / ts.Cylinder / ts.Cone (geometry.py), their
+            restitution and friction resolved; sinks: tuple of ts.Sink
     """
 
     x: np.ndarray
@@ -72,6 +81,24 @@ class Scene:
     name: str = "scene"
     #: settings read from a scene file that are not physics ([run], [physics] extras)
     meta: dict = dataclasses.field(default_factory=dict)
+    friction: float = 0.0
+    wall_friction: float = 0.0
+    tangential_restitution: float = -1.0
+    rolling_friction: float = 0.0
+    omega: np.ndarray = None
+    geometry: tuple = ()
+    sinks: tuple = ()
+
+    def __post_init__(self):
+        if self.omega is None:
+            object.__setattr__(self, "omega", np.zeros_like(self.v))
+
+    @property
+    def frictional(self) -> bool:
+        """True when a friction coefficient (pairs, walls, geometry, rolling) is not 0:
+        the engine then simulates spin."""
+        return bool(self.friction or self.wall_friction or self.rolling_friction
+                    or any(g.friction for g in self.geometry))
 
     @property
     def n(self) -> int:
@@ -86,7 +113,9 @@ class Scene:
     def from_arrays(cls, x, v, radius, mass=None, density=None,
                     box=((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)), periodic=(False, False, False),
                     gravity=(0.0, 0.0, -9.81), restitution=1.0, wall_restitution=1.0,
-                    name="scene", restitution_model="normal", rest_speed=None) -> "Scene":
+                    name="scene", restitution_model="normal", rest_speed=None,
+                    friction=0.0, wall_friction=None, tangential_restitution=-1.0,
+                    rolling_friction=0.0, omega=None, geometry=(), sinks=()) -> "Scene":
         """Build and validate a scene from arrays.
 
         x, v: (N, 3) positions [m] and velocities [m/s]. radius: scalar or (N,) [m].
@@ -94,7 +123,10 @@ class Scene:
         * 4/3 pi r^3); give at most one of them, neither means density 1000 kg/m^3.
         box: ((xlo, ylo, zlo), (xhi, yhi, zhi)); periodic: per-axis bools.
         restitution_model: "normal" or "smid"; rest_speed: None or >= 0 [m/s]
-        (see the class docstring).
+        (see the class docstring). friction >= 0, wall_friction (None: = friction),
+        tangential_restitution in [-1, 1], rolling_friction >= 0; omega: (N, 3) [rad/s]
+        or None (zero spin); geometry: ts.Plane / ts.Cylinder / ts.Cone objects (their
+        restitution and friction None: the wall values); sinks: ts.Sink regions.
         Raises ValueError naming the argument or sphere index at fault.
         """
         x, v, radius = _spheres(x, v, radius)
@@ -113,10 +145,18 @@ class Scene:
         rest_speed = _rest_speed(rest_speed)
         _inside_box(x, radius, lo, hi, periodic)
         _no_overlaps(x, radius, lo, hi, periodic)
-        return cls(x=x, v=v, radius=radius, mass=mass, box_lo=lo, box_hi=hi,
-                   periodic=periodic, gravity=gravity, restitution=restitution,
-                   wall_restitution=wall_restitution, restitution_model=restitution_model,
-                   rest_speed=rest_speed, name=str(name))
+        spin = _friction(friction, wall_friction, tangential_restitution, rolling_friction)
+        spin["omega"] = _omega(omega, x.shape[0], radius)
+        shapes = _geometry(geometry, sinks, wall_restitution, spin["wall_friction"], x, radius,
+                           lo, hi)
+        scene = cls(x=x, v=v, radius=radius, mass=mass, box_lo=lo, box_hi=hi,
+                    periodic=periodic, gravity=gravity, restitution=restitution,
+                    wall_restitution=wall_restitution, restitution_model=restitution_model,
+                    rest_speed=rest_speed, name=str(name), **spin, **shapes)
+        if scene.frictional and restitution_model == "smid":
+            raise ValueError("restitution_model 'smid' has no tangential model: use "
+                             "'normal' with friction")
+        return scene
 
     def replace(self, **changes) -> "Scene":
         """A validated copy with some arguments of :meth:`from_arrays` changed."""
@@ -124,7 +164,11 @@ class Scene:
                     box=(self.box_lo, self.box_hi), periodic=self.periodic,
                     gravity=self.gravity, restitution=self.restitution,
                     wall_restitution=self.wall_restitution, name=self.name,
-                    restitution_model=self.restitution_model, rest_speed=self.rest_speed)
+                    restitution_model=self.restitution_model, rest_speed=self.rest_speed,
+                    friction=self.friction, wall_friction=self.wall_friction,
+                    tangential_restitution=self.tangential_restitution,
+                    rolling_friction=self.rolling_friction, omega=self.omega,
+                    geometry=self.geometry, sinks=self.sinks)
         if "density" in changes:
             args.pop("mass")
         args.update(changes)
@@ -199,6 +243,55 @@ def _rest_speed(rest_speed):
     if not (math.isfinite(rest_speed) and rest_speed >= 0):
         raise ValueError(f"rest_speed must be a finite number >= 0, got {rest_speed}")
     return rest_speed
+
+
+def _coefficient(name, value, low=0.0, high=math.inf) -> float:
+    """A finite number in [low, high], else ValueError naming it."""
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not (low <= out <= high) or not math.isfinite(out):
+        limit = f"in [{low:g}, {high:g}]" if math.isfinite(high) else f">= {low:g} and finite"
+        raise ValueError(f"{name} must be {limit}, got {value!r}")
+    return out
+
+
+def _friction(friction, wall_friction, beta0, rolling) -> dict:
+    """Checked friction, wall_friction (None: = friction), tangential_restitution and
+    rolling_friction."""
+    mu = _coefficient("friction", friction)
+    return dict(friction=mu,
+                wall_friction=mu if wall_friction is None else
+                _coefficient("wall_friction", wall_friction),
+                tangential_restitution=_coefficient("tangential_restitution", beta0, -1.0, 1.0),
+                rolling_friction=_coefficient("rolling_friction", rolling))
+
+
+def _omega(omega, n, radius) -> np.ndarray:
+    """(n, 3) angular velocities [rad/s] (zeros for None), finite, their surface speed
+    |omega| r within what f64 holds."""
+    if omega is None:
+        return np.zeros((n, 3))
+    omega = _array("omega", omega, ndim=2)
+    if omega.shape != (n, 3):
+        raise ValueError(f"omega must have shape ({n}, 3) like x, got {omega.shape}")
+    _finite_rows("omega", omega)
+    problem = speed_problem("f64", omega * radius[:, None])
+    if problem:
+        raise ValueError("omega: surface " + problem)
+    return omega
+
+
+def _geometry(geometry, sinks, wall_restitution, wall_friction, x, radius, lo, hi) -> dict:
+    """Checked geometry (materials resolved, no sphere inside, orifices within the box)
+    and sinks."""
+    shapes = geo.resolved(() if geometry is None else geometry, wall_restitution,
+                          wall_friction)
+    problems = [geo.hole_problem(k, g, lo, hi) for k, g in enumerate(shapes)
+                if isinstance(g, geo.Plane)]
+    _raise_first(problems + [geo.inside_problem(x, radius, shapes, TOUCH_TOLERANCE)])
+    return dict(geometry=shapes, sinks=geo.check_sinks(() if sinks is None else sinks, lo, hi))
 
 
 def _raise_first(problems):

@@ -11,7 +11,7 @@ Units are SI, z is up. docs/scenes.md lists every key and its default.
                step_fraction, max_sweeps, precision
     [run]      duration (s), fps
     [render]   width, height (multiples of 16), camera_position, camera_lookat, fov,
-               colours ("group" | "speed"), background
+               colours ("group" | "speed" | "spin"), background
     [output]   video (path, .mp4), snapshots (bool: .npz), checkpoint_every (frames),
                trajectory (path, .gsd), trajectory_every (steps)
     [initial]  gsd (path of a GSD file, relative to the scene file), frame (index, -1:
@@ -24,6 +24,10 @@ Units are SI, z is up. docs/scenes.md lists every key and its default.
     [[random]]   count spheres at random non-overlapping places in a region
                  (lo, hi), radius (radius_spread p: uniform in radius * [1-p, 1]),
                  mass|density, v | speed, seed
+    [physics] also: friction, wall_friction, tangential_restitution, rolling_friction;
+    [[spheres]] also omega (rad/s)
+    [[plane]], [[cylinder]], [[cone]], [[sink]]: static geometry and sinks
+                 (scenegeometry.py; keys as ts.Plane, ts.Cylinder, ts.Cone, ts.Sink)
 """
 from __future__ import annotations
 
@@ -41,23 +45,26 @@ except ImportError:  # Python 3.10
 import numpy as np
 
 from .scene import DEFAULT_DENSITY, RESTITUTION_MODELS, Scene
+from .scenegeometry import geometry_tables, table_items
 
 __all__ = ["load_scene", "scene_from_dict", "SceneFileError"]
 
 _TOP = {"name": str, "box": dict, "physics": dict, "run": dict, "render": dict, "output": dict,
-        "initial": dict, "spheres": list, "lattice": list, "random": list, "pour": list}
+        "initial": dict, "spheres": list, "lattice": list, "random": list, "pour": list,
+        "plane": list, "cylinder": list, "cone": list, "sink": list}
 _RENDER = {"width": int, "height": int, "camera_position": "vec3", "camera_lookat": "vec3",
            "fov": float, "colours": str, "background": "vec3"}
 _BOX = {"lo": "vec3", "hi": "vec3", "periodic": "bool3", "wall_restitution": float}
 _PHYSICS = {"gravity": "vec3", "restitution": float, "step_fraction": float,
             "max_sweeps": int, "precision": str, "restitution_model": str,
-            "rest_speed": float}
+            "rest_speed": float, "friction": float, "wall_friction": float,
+            "tangential_restitution": float, "rolling_friction": float}
 _RUN = {"duration": float, "fps": float}
 _OUTPUT = {"video": str, "snapshots": bool, "checkpoint_every": int, "trajectory": str,
            "trajectory_every": int}
 _INITIAL = {"gsd": str, "frame": int}
 _SPHERE = {"colour": "vec3", "x": "vec3", "v": "vec3", "radius": float, "mass": float,
-           "density": float}
+           "density": float, "omega": "vec3"}
 _LATTICE = {"colour": "vec3", "v_spread": float, "lo": "vec3", "hi": "vec3", "spacing": float, "radius": float,
             "mass": float,
             "density": float, "v": "vec3", "speed": float, "seed": int}
@@ -102,17 +109,20 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
     Raises SceneFileError listing every problem found."""
     problems: list = []
     tables = _settings_tables(data, problems)
+    shapes = geometry_tables(data, _check_table, problems)
     groups = _sphere_groups(data, problems)
     box, physics, initial = tables["box"], tables["physics"], tables["initial"]
     _check_scene_wide(box, physics, initial, groups, problems)
     meta = {"run": tables["run"], "physics": physics, "render": tables["render"],
             "output": tables["output"], "source": source}
     if "gsd" in initial and not problems:
-        return _scene_from_initial(initial, box, physics, data, meta, source)
-    arrays = _generated_arrays(groups, box, problems) if not problems else None
+        return _scene_from_initial(initial, box, physics, dict(data, _shapes=shapes), meta,
+                                   source)
+    arrays = _generated_arrays(groups, box, problems, shapes) if not problems else None
     if problems:
         raise SceneFileError(source, problems)
-    return _scene_from_groups(groups, arrays, box, physics, data, meta, source)
+    return _scene_from_groups(groups, arrays, box, physics, dict(data, _shapes=shapes), meta,
+                              source)
 
 
 def _settings_tables(data, problems) -> dict:
@@ -135,14 +145,7 @@ def _sphere_groups(data, problems) -> list:
     groups = []
     for key, schema in (("spheres", _SPHERE), ("lattice", _LATTICE), ("random", _RANDOM),
                         ("pour", _POUR)):
-        items = data.get(key, [])
-        if not isinstance(items, list):
-            continue
-        for k, item in enumerate(items):
-            where = f"{key}[{k}]"
-            if not isinstance(item, dict):
-                problems.append(f"{where}: must be a table ([[{key}]])")
-                continue
+        for where, item in table_items(data, key, problems):
             _check_table(item, schema, where + ".", problems)
             _check_group(key, where, item, schema, problems)
             groups.append((key, where, item))
@@ -161,17 +164,17 @@ def _check_scene_wide(box, physics, initial, groups, problems):
                         "tables, or [initial] gsd")
 
 
-def _generated_arrays(groups, box, problems) -> dict:
+def _generated_arrays(groups, box, problems, shapes) -> dict:
     """Per-group lists of x (K, 3) [m], v (K, 3) [m/s], radius (K,) [m], mass (K,) [kg]
     and group (K,) index arrays, generated in file order (so each group's random draws
     come from its own seed); a group that cannot be generated adds a problem."""
     lo = box.get("lo", [0.0, 0.0, 0.0])
     hi = box.get("hi", [1.0, 1.0, 1.0])
-    arrays = {"x": [], "v": [], "radius": [], "mass": [], "group": []}
+    arrays = {"x": [], "v": [], "radius": [], "mass": [], "group": [], "omega": []}
     for kind, where, item in groups:
         try:
             _generate(kind, where, item, lo, hi, arrays, problems,
-                      periodic=box.get("periodic", False))
+                      periodic=box.get("periodic", False), shapes=shapes["geometry"])
         except ValueError as exc:
             problems.append(f"{where}: {exc}")
     return arrays
@@ -187,6 +190,7 @@ def _scene_from_groups(groups, arrays, box, physics, data, meta, source) -> Scen
         scene = Scene.from_arrays(
             np.concatenate(arrays["x"]), np.concatenate(arrays["v"]),
             np.concatenate(arrays["radius"]), mass=np.concatenate(arrays["mass"]),
+            omega=np.concatenate(arrays["omega"]),
             box=(lo, hi), periodic=box.get("periodic", [False, False, False]),
             **_physics_args(box, physics, data))
     except ValueError as exc:
@@ -201,11 +205,17 @@ def _scene_from_groups(groups, arrays, box, physics, data, meta, source) -> Scen
 def _physics_args(box, physics, data) -> dict:
     """The arguments of Scene.from_arrays that the [physics] and [box] tables give,
     besides the box and its periodicity."""
+    shapes = data.get("_shapes", {})
     return dict(gravity=physics.get("gravity", [0.0, 0.0, 0.0]),
                 restitution=physics.get("restitution", 1.0),
                 wall_restitution=box.get("wall_restitution", 1.0),
                 restitution_model=physics.get("restitution_model", "normal"),
-                rest_speed=physics.get("rest_speed"), name=data.get("name", "scene"))
+                rest_speed=physics.get("rest_speed"), name=data.get("name", "scene"),
+                friction=physics.get("friction", 0.0),
+                wall_friction=physics.get("wall_friction"),
+                tangential_restitution=physics.get("tangential_restitution", -1.0),
+                rolling_friction=physics.get("rolling_friction", 0.0),
+                geometry=shapes.get("geometry", ()), sinks=shapes.get("sinks", ()))
 
 
 def _check_output(output, problems):
@@ -256,8 +266,9 @@ def _check_render(render, run, problems):
         if key in render and isinstance(render[key], int) and (render[key] <= 0 or render[key] % 16):
             problems.append(f"render.{key}: must be a positive multiple of 16 (H.264 blocks), "
                             f"got {render[key]}")
-    if "colours" in render and render["colours"] not in ("group", "speed"):
-        problems.append(f"render.colours: must be \"group\" or \"speed\", got {render['colours']!r}")
+    if "colours" in render and render["colours"] not in ("group", "speed", "spin"):
+        problems.append(f"render.colours: must be \"group\", \"speed\" or \"spin\", got "
+                        f"{render['colours']!r}")
     _check_colour("render.background", _valid(render, "background", _RENDER), problems)
     if "fov" in render and _is_number(render["fov"]) and not 0 < render["fov"] < 180:
         problems.append(f"render.fov: must be in (0, 180) degrees, got {render['fov']}")
@@ -454,21 +465,24 @@ def _velocities(item, count, rng):
     return out
 
 
-def pour_positions(count, radius, lo, hi, rng):
+def pour_positions(count, radius, lo, hi, rng, shapes=()):
     """A pour: ``count`` spheres on a jittered lattice (spacing 2.5 r) filling the region
-    [lo, hi] from the top down, as grains leaving a hopper; raises if it is too small."""
+    [lo, hi] from the top down, as grains leaving a hopper, at sites clear of the
+    geometry objects ``shapes`` (geometry.py); raises if it is too small."""
     spacing = 2.5 * radius
     axes = [np.arange(lo[a] + radius, hi[a] - radius + 1e-12, spacing) for a in range(3)]
     if any(len(ax) == 0 for ax in axes):
         raise ValueError("region too small for one sphere")
-    per_layer = len(axes[0]) * len(axes[1])
-    layers = -(-count // per_layer)
-    if layers > len(axes[2]):
-        raise ValueError(f"region holds {per_layer * len(axes[2])} spheres at spacing "
-                         f"{spacing:g} m, not {count}: make it taller")
-    z = axes[2][::-1][:layers]
-    grid = np.stack(np.meshgrid(axes[0], axes[1], z, indexing="ij"), -1)
-    sites = grid.transpose(2, 0, 1, 3).reshape(-1, 3)[:count]     # top layer first
+    grid = np.stack(np.meshgrid(axes[0], axes[1], axes[2][::-1], indexing="ij"), -1)
+    sites = grid.transpose(2, 0, 1, 3).reshape(-1, 3)             # top layer first
+    reach = radius + 0.5 * (spacing - 2 * radius)         # a sphere and its jitter
+    for g in shapes:
+        sites = sites[g.gap(sites, np.full(len(sites), reach)) >= 0]
+    if len(sites) < count:
+        raise ValueError(f"region holds {len(sites)} spheres at spacing {spacing:g} m"
+                         + (" clear of the geometry" if shapes else "")
+                         + f", not {count}: make it taller")
+    sites = sites[:count]
     jitter = 0.5 * (spacing - 2 * radius) * (2 * rng.random((count, 3)) - 1)
     return np.clip(sites + jitter, lo + radius, hi - radius)
 
@@ -479,7 +493,8 @@ def _need(item, keys, where):
         raise ValueError("missing " + ", ".join(f"'{k}'" for k in missing))
 
 
-def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=False):
+def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=False,
+              shapes=()):
     rng = np.random.default_rng(item.get("seed", 0))
     if kind == "spheres":
         _need(item, ("x", "radius"), where)
@@ -506,7 +521,7 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=Fals
         count = int(item["count"])
         lo = np.asarray(item.get("lo", box_lo), dtype=np.float64)
         hi = np.asarray(item.get("hi", box_hi), dtype=np.float64)
-        x = pour_positions(count, float(item["radius"]), lo, hi, rng)
+        x = pour_positions(count, float(item["radius"]), lo, hi, rng, shapes)
     else:
         _need(item, ("count", "radius"), where)
         count = int(item["count"])
@@ -528,6 +543,8 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=Fals
     arrays["radius"].append(radius)
     arrays["mass"].append(_mass_of(item, radius, where, count))
     arrays["group"].append(np.full(count, len(arrays["group"]), dtype=np.int64))
+    arrays["omega"].append(np.tile(np.asarray(item.get("omega", [0.0, 0.0, 0.0]),
+                                              dtype=np.float64), (count, 1)))
 
 
 def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=200,

@@ -9,11 +9,14 @@ Each contact row s (normal n, accumulated normal impulse lambda_n) carries
   mass m_t = 2/7 m_eff (contacts/friction.py), then clamped to the friction disc
   ``|lam_t| <= mu lambda_n`` (Coulomb; isotropic, so the result does not depend on a
   choice of tangent axes);
-- with rolling friction mu_r, an angular impulse lam_r (tangent to the contact)
-  driving the relative rolling spin ``w_a - w_b`` (its tangential part) to zero,
-  clamped to ``|lam_r| <= mu_r r_eff lambda_n`` (r_eff = r_a r_b / (r_a + r_b), r_a
-  on a wall): the torque of a rolling resistance bounded by mu_r r_eff times the
-  normal force (Zhou et al. 1999's constant-torque model, in impulse form).
+- with rolling friction mu_r, an angular impulse lam_r driving the relative spin
+  ``w_a - w_b`` to zero, clamped to ``|lam_r| <= mu_r r_eff lambda_n`` (r_eff = r_a r_b
+  / (r_a + r_b), r_a on a wall): the torque of a rolling resistance bounded by mu_r
+  r_eff times the normal force (Zhou et al. 1999's constant-torque model, in impulse
+  form). It resists rolling (spin about a tangent) and twisting (spin about the
+  normal) alike, as Project Chrono's rolling and spinning friction with equal
+  coefficients: otherwise a grain spinning about the vertical on a floor, which no
+  tangential force slows, would spin for ever.
 Friction is solved before the normal row in each sweep (Box2D's order: the normal row,
 which prevents overlap, has the last word).
 
@@ -107,8 +110,8 @@ class FrictionRows:
 
     @ti.func
     def rolling_row(self, s):
-        """One update of row s's rolling impulse; returns the change of the relative
-        rolling spin times r_a it made [m/s]."""
+        """One update of row s's rolling (and twisting) impulse; returns the change of
+        the relative spin times r_a it made [m/s]."""
         a = self.row_a[s]
         b = self.row_b[s]
         wrel = self.state.omega[a]
@@ -117,7 +120,7 @@ class FrictionRows:
             wrel = wrel - self.state.omega[b]
             k += self.state.inv_inertia_of(b)
         old = self.lam_r[s]
-        new = self.clamped(old - tangential_part(wrel, self.normal[s]) / k, self.rolling_limit(s))
+        new = self.clamped(old - wrel / k, self.rolling_limit(s))
         self.lam_r[s] = new
         self.push_rolling(a, b, new - old)
         return (new - old).norm() * k * self.state.rad(a)

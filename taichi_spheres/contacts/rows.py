@@ -210,7 +210,7 @@ class ContactRows:
     def warm_row(self, s):
         """Start row s from last step's impulses of the same contact, scaled by h /
         h_prev (normal; with friction the tangential impulse turned into the new tangent
-        plane and within the friction cone, and the rolling one likewise)."""
+        plane and within the friction cone, the rolling one within its bound)."""
         a = self.row_a[s]
         t = self.warm_slot(a, self.row_b[s])
         if t >= 0:
@@ -221,8 +221,7 @@ class ContactRows:
                 self.lam_t[s] = self.clamped(tangential_part(self.warm_t[a, t], n) * scale,
                                              self.row_friction(s) * self.lam[s])
                 if ti.static(self.f.rolling):
-                    self.lam_r[s] = self.clamped(tangential_part(self.warm_r[a, t], n) * scale,
-                                                 self.rolling_limit(s))
+                    self.lam_r[s] = self.clamped(self.warm_r[a, t] * scale, self.rolling_limit(s))
 
     @ti.func
     def prepare_rows(self):

@@ -1,0 +1,252 @@
+"""Friction and rotation (contacts/friction.py, friction_rows.py), static geometry
+(surfaces.py) and sinks (discharge.py) against closed forms: sliding to rolling,
+inclines in both regimes, Walton's oblique impacts on a wall and between two spheres,
+angular momentum, energy, and spheres held in cylinders and hoppers and discharged
+through an orifice.
+
+Tolerances: relative, scaled by the precision's machine epsilon (conftest.tol) where
+the closed form is reached to round-off.
+"""
+import math
+
+import numpy as np
+import pytest
+
+import taichi_spheres as ts
+from taichi_spheres import observe
+
+from conftest import tol
+
+G = 9.81
+
+
+def walton(v1, v2, w1, w2, r1, r2, m1, m2, n, e, mu, beta0):
+    """Velocities and spins after an impact of spheres 1 and 2 touching along n (from 2
+    to 1) by Walton's model (Foerster et al. 1994); m2 = inf for a wall (v2 = w2 = 0)."""
+    inv2 = 0.0 if math.isinf(m2) else 1.0 / m2
+    meff = 1.0 / (1.0 / m1 + inv2)
+    uc = v1 - v2 - np.cross(r1 * w1 + r2 * w2, n)
+    un = uc @ n
+    ut = uc - un * n
+    jn = -(1 + e) * meff * un
+    beta_max = 0.0 if beta0 == -1.0 else beta0
+    speed = np.linalg.norm(ut)
+    jt = min((1 + beta_max) * 2 / 7 * meff * speed, mu * jn)
+    p = jn * n - (jt / speed * ut if speed > 0 else 0)
+    i1 = 0.4 * m1 * r1 ** 2
+    out = [v1 + p / m1, v2 - p * inv2, w1 - r1 / i1 * np.cross(n, p), w2]
+    if inv2:
+        out[3] = w2 - r2 / (0.4 * m2 * r2 ** 2) * np.cross(n, p)
+    return out
+
+
+def _one(x, v, r, omega=None, box=((0, 0, 0), (1, 1, 1)), **kw):
+    """A scene of the given spheres (water density) with friction settings kw."""
+    return ts.Scene.from_arrays(np.atleast_2d(x), np.atleast_2d(v), r, box=box,
+                                omega=None if omega is None else np.atleast_2d(omega), **kw)
+
+
+def test_sliding_sphere_rolls_at_five_sevenths(arch, precision):
+    """v0 on the floor with no spin: slides with deceleration mu g until t = 2 v0 / (7 mu
+    g), then rolls at 5/7 v0 with omega = v / r (angular momentum about the contact)."""
+    r, mu, v0 = 0.05, 0.3, 1.0
+    sc = _one([0.2, 0.5, r], [v0, 0, 0], r, box=((0, 0, 0), (2, 1, 1)), restitution=0.5,
+              wall_restitution=0.5, friction=mu)
+    sim = ts.Simulation(sc, arch=arch, precision=precision)
+    t_roll = 2 * v0 / (7 * mu * G)
+    sim.advance_to(0.98 * t_roll)
+    st = sim.state()
+    assert st.v[0, 0] == pytest.approx(v0 - mu * G * st.time, rel=tol(precision, 64))
+    assert st.v[0, 0] > st.omega[0, 1] * r          # still slipping
+    sim.advance_to(t_roll + 2 * sim.last_step["h"])
+    for _ in range(2):
+        st = sim.state()
+        assert st.v[0, 0] == pytest.approx(5 / 7 * v0, rel=max(1e-6, tol(precision, 64)))
+        assert st.omega[0, 1] * r == pytest.approx(5 / 7 * v0, rel=max(1e-6, tol(precision, 64)))
+        assert np.abs(st.v[0, 1:]).max() < tol(precision, 64)
+        sim.advance(0.2)
+
+
+@pytest.mark.parametrize("degrees", [20.0, 60.0])
+def test_sphere_on_incline(arch, precision, degrees):
+    """A sphere released on a plane tilted by theta: rolls with a = 5/7 g sin(theta) when
+    tan(theta) <= 7/2 mu, else slides with a = g (sin(theta) - mu cos(theta))."""
+    r, mu = 0.02, 0.3
+    th = math.radians(degrees)
+    n = np.array([-math.sin(th), 0.0, math.cos(th)])
+    p0 = np.array([0.5, 0.5, 0.5])
+    sc = _one(p0 + r * n, [0, 0, 0], r, restitution=0.5, wall_restitution=0.5, friction=mu,
+              geometry=[ts.Plane(p0, n)])
+    sim = ts.Simulation(sc, arch=arch, precision=precision)
+    sim.advance(0.1)
+    st = sim.state()
+    down = np.array([-math.cos(th), 0.0, -math.sin(th)])
+    rolls = math.tan(th) <= 3.5 * mu
+    a = 5 / 7 * G * math.sin(th) if rolls else G * (math.sin(th) - mu * math.cos(th))
+    assert st.v[0] @ down == pytest.approx(a * 0.1, rel=max(1e-9, tol(precision, 4096)))
+    assert abs((st.x[0] - p0) @ n - r) < 1e-4 * 2 * r
+    slip = st.v[0] @ down - st.omega[0, 1] * -r
+    assert (abs(slip) < 1e-6) == rolls
+
+
+@pytest.mark.parametrize("beta0, w1", [(0.35, (0, 0, 0)), (0.35, (0, 400, -100)),
+                                       (-1.0, (0, 0, 0))])
+def test_oblique_pair_impact_follows_walton(arch, beta0, w1):
+    """Two spheres of glass-like e, mu (Foerster et al. 1994) meeting obliquely, in the
+    sticking (large spin) and sliding regimes: velocities and spins after the impact
+    equal Walton's closed form, and the total angular momentum (orbital + spin) is
+    conserved, to round-off."""
+    e, mu = 0.97, 0.092
+    r = np.array([0.01, 0.015])
+    n = np.array([-0.8, -0.36, 0.48])
+    n /= np.linalg.norm(n)
+    x = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.5]])
+    x[1] -= n * r.sum()
+    v = np.array([[0.6, 0.2, -0.3], [-0.4, 0.1, 0.05]])
+    w = np.array([w1, (20.0, 0.0, 30.0)], dtype=float)
+    m = 1000 * 4 / 3 * np.pi * r ** 3
+    sc = ts.Scene.from_arrays(x, v, r, box=((0, 0, 0), (1, 1, 1)), gravity=(0, 0, 0),
+                              restitution=e, friction=mu, tangential_restitution=beta0,
+                              omega=w)
+    sim = ts.Simulation(sc, arch=arch, precision="f64")
+    before = sim.state()
+    sim.advance(1e-3)
+    st = sim.state()
+    assert sim.stats["pair_collisions"] == 1
+    want = walton(v[0], v[1], w[0], w[1], r[0], r[1], m[0], m[1], n, e, mu, beta0)
+    scale = np.abs(v).max()
+    for got, exp in zip((st.v[0], st.v[1]), want[:2]):
+        assert np.abs(got - exp).max() < 1e-12 * scale
+    for got, exp, ri in zip((st.omega[0], st.omega[1]), want[2:], r):
+        assert np.abs(got - exp).max() * ri < 1e-12 * scale
+    l0 = observe.angular_momentum(before)
+    l1 = observe.angular_momentum(st)
+    assert np.abs(l1 - l0).max() < 1e-12 * np.abs(l0).max()
+    assert observe.total_energy(st, (0, 0, 0)) <= observe.total_energy(before, (0, 0, 0))
+
+
+@pytest.mark.parametrize("w0", [(0, 0, 0), (0, -300, 0), (0, 2000, 0)])
+def test_oblique_wall_impact_follows_walton(arch, w0):
+    """A spinning sphere hitting the floor obliquely (no gravity): rebound velocity and
+    spin equal Walton's closed form for the wall (infinite mass) in both regimes."""
+    e, mu, beta0, r = 0.9, 0.2, 0.4, 0.01
+    v = np.array([0.7, -0.2, -1.0])
+    sc = _one([0.5, 0.5, r * 1.5], v, r, omega=w0, gravity=(0, 0, 0), wall_restitution=e,
+              wall_friction=mu, tangential_restitution=beta0)
+    sim = ts.Simulation(sc, arch=arch, precision="f64")
+    sim.advance(0.01)
+    st = sim.state()
+    m = 1000 * 4 / 3 * np.pi * r ** 3
+    want = walton(v, np.zeros(3), np.array(w0, float), np.zeros(3), r, 0.0, m, math.inf,
+                  np.array([0.0, 0.0, 1.0]), e, mu, beta0)
+    assert sim.stats["wall_collisions"] == 1
+    assert np.abs(st.v[0] - want[0]).max() < 1e-13
+    assert np.abs(st.omega[0] - want[2]).max() * r < 1e-13
+
+
+def test_friction_off_compiles_no_spin():
+    """Without friction no spin field exists and st.omega is zero."""
+    sc = _one([0.5, 0.5, 0.5], [1, 0, 0], 0.01, gravity=(0, 0, 0))
+    sim = ts.Simulation(sc, arch="cpu", precision="f64")
+    assert sim.debug_view().state.omega is None
+    assert not sim.features.friction
+    sim.advance(0.5)
+    assert np.all(sim.state().omega == 0)
+
+
+def _pile(n_side=4, mu=0.5, mu_r=0.0, e=0.5, seed=3):
+    """n_side^2 x 3 spheres dropped from a jittered lattice into a small box."""
+    rng = np.random.default_rng(seed)
+    r = 0.01
+    g = np.arange(n_side) * 0.025 + 0.015
+    x = np.array([(a, b, c) for a in g for b in g for c in (0.02, 0.05, 0.08)], float)
+    x[:, :2] += rng.uniform(-2e-3, 2e-3, (len(x), 2))
+    v = rng.uniform(-0.2, 0.2, x.shape)
+    side = n_side * 0.025 + 0.005
+    return ts.Scene.from_arrays(x, v, r, box=((0, 0, 0), (side, side, 0.3)), restitution=e,
+                                wall_restitution=e, friction=mu, rolling_friction=mu_r)
+
+
+@pytest.mark.parametrize("mu_r", [0.0, 0.1])
+def test_frictional_pile_energy_is_booked_and_settles(arch, mu_r):
+    """A frictional pile: total energy (spin included) stays below the start at every
+    step and every joule is booked; with rolling friction it never grows from one step
+    to the next and comes to rest (without it a sphere on the floor may roll on: no
+    force slows a rolling sphere). Overlaps stay small."""
+    sim = ts.Simulation(_pile(mu_r=mu_r), arch=arch, precision="f64")
+    energy = [sim.energy_budget()["current"]]
+    for _ in range(1500):
+        sim.advance(sim.max_step())
+        energy.append(sim.energy_budget()["current"])
+    energy = np.array(energy)
+    assert energy.max() <= energy[0] * (1 + 1e-12)
+    budget = sim.energy_budget()
+    assert abs(budget["unaccounted"]) <= 1e-9 * abs(budget["initial"])
+    assert sim.stats["max_overlap"] < 1e-3
+    if mu_r > 0:
+        assert np.diff(energy).max() <= 1e-12 * energy[0]
+        st = sim.state()
+        assert np.abs(st.v).max() < 1e-6
+        assert np.abs(st.omega * st.radius[:, None]).max() < 1e-6
+
+
+def test_friction_same_bits_for_any_thread_count(arch):
+    """The frictional solve gives the same bits on 1 and 2 threads (a CPU property)."""
+    if arch != "cpu":
+        pytest.skip("thread counts are a CPU setting")
+    digests = []
+    for threads in (1, 2):
+        sim = ts.Simulation(_pile(), arch=arch, precision="f64", threads=threads)
+        sim.advance(0.3)
+        st = sim.state()
+        digests.append((observe.state_digest(st, "f64"), st.omega.tobytes()))
+    assert digests[0] == digests[1]
+
+
+def _silo(hole, mu=0.5, recycle=False, n_side=5):
+    """Spheres in a cylinder of radius 0.05 m standing on a plane at z = 0.05 with an
+    orifice of radius ``hole``; a sink below the plane."""
+    r = 0.005
+    g = (np.arange(n_side) - (n_side - 1) / 2) * 0.013
+    x = np.array([(0.06 + a, 0.06 + b, 0.06 + 0.012 * k) for a in g for b in g
+                  for k in range(4)], float)
+    x = x[np.hypot(x[:, 0] - 0.06, x[:, 1] - 0.06) < 0.045 - r]
+    return ts.Scene.from_arrays(
+        x, np.zeros_like(x), r, box=((0, 0, 0), (0.12, 0.12, 0.2)), restitution=0.5,
+        wall_restitution=0.5, friction=mu,
+        geometry=[ts.Plane((0.06, 0.06, 0.05), (0, 0, 1), hole=hole),
+                  ts.Cylinder((0.06, 0.06, 0.05), (0, 0, 1), 0.05, length=0.15)],
+        sinks=[ts.Sink((0, 0, 0), (0.12, 0.12, 0.03), recycle=recycle)])
+
+
+def test_silo_holds_without_orifice_and_discharges_through_it(arch):
+    """Without an orifice the cylinder and floor hold every sphere (inside, resting,
+    small gaps); with one wider than a few diameters spheres leave through it into
+    the sink, which counts them and their mass, and energy stays booked."""
+    closed = ts.Simulation(_silo(hole=None), arch=arch, precision="f64")
+    closed.advance(0.5)
+    st = closed.state()
+    rho = np.hypot(st.x[:, 0] - 0.06, st.x[:, 1] - 0.06)
+    assert np.all(rho + st.radius <= 0.05 * (1 + 1e-3))
+    assert np.all(st.x[:, 2] - st.radius >= 0.05 - 1e-3 * 0.01)
+    assert closed.stats["discharged"] == 0
+    assert np.abs(st.v).max() < 1e-2
+    open_ = ts.Simulation(_silo(hole=0.02), arch=arch, precision="f64")
+    n0 = open_.n
+    open_.advance(0.5)
+    s = open_.stats
+    assert s["discharged"] > 0 and open_.n == n0 - s["discharged"]
+    assert s["discharged_mass"] == pytest.approx(s["discharged"] * open_.scene.mass[0])
+    budget = open_.energy_budget()
+    assert abs(budget["unaccounted"]) < 1e-6 * abs(budget["initial"])
+
+
+def test_recycled_spheres_reenter_at_the_top(arch):
+    """With recycle the sphere count stays; discharged spheres re-enter at rest in free
+    spots at the top of the box."""
+    sim = ts.Simulation(_silo(hole=0.02, recycle=True), arch=arch, precision="f64")
+    n0 = sim.n
+    sim.advance(0.4)
+    assert sim.n == n0 and sim.stats["discharged"] > 0
+    st = sim.state()
+    assert np.all(st.x[:, 2] >= 0.03)          # none left in the sink
