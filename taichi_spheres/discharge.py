@@ -84,7 +84,8 @@ def renumber_warm(warm: dict | None, keep: np.ndarray) -> dict | None:
     new_index = np.cumsum(keep) - 1
     out = {k: (v[keep] if isinstance(v, np.ndarray) else v) for k, v in warm.items()}
     key = out["key"]
-    pair = key >= 0
+    used = np.arange(key.shape[1])[None, :] < out["kept"][:, None]   # slots in use
+    pair = used & (key >= 0) & (key < len(keep))
     partner = np.where(pair, key, 0)
     alive = keep[partner] | ~pair
     out["key"] = np.where(pair, np.where(alive, new_index[partner], -(2 ** 30)), key)

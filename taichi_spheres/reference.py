@@ -63,7 +63,7 @@ import numpy as np
 from .scene import Scene
 from .state import State
 
-__all__ = ["EventDrivenReference"]
+__all__ = ["EventDrivenReference", "walton_impact"]
 
 _INF = math.inf
 
@@ -436,3 +436,24 @@ def _first_contact_quartic(d, u, a, sigma, just_collided=False):
                     hi = mid
             return hi if abs(fs(hi)) <= abs(fs(lo)) else lo
     return _INF
+
+
+def walton_impact(v1, v2, w1, w2, r1, r2, m1, m2, n, e, mu, beta0):
+    """Walton's impact model in closed form (Foerster et al. 1994; contacts/friction.py):
+    velocities v [m/s] and spins w [rad/s] of solid spheres 1 and 2 (radii r [m],
+    masses m [kg]; m2 = inf for a wall, with v2 = w2 = 0) touching along the unit
+    normal n (from 2 to 1), restitution e, friction mu, tangential restitution beta0
+    (-1: the sticking bound 0). Returns (v1', v2', w1', w2')."""
+    v1, v2, w1, w2, n = (np.asarray(a, dtype=np.float64) for a in (v1, v2, w1, w2, n))
+    inv2 = 0.0 if np.isinf(m2) else 1.0 / m2
+    meff = 1.0 / (1.0 / m1 + inv2)
+    uc = v1 - v2 - np.cross(r1 * w1 + r2 * w2, n)
+    un = uc @ n
+    ut = uc - un * n
+    jn = -(1 + e) * meff * un
+    speed = np.linalg.norm(ut)
+    jt = min((1 + (0.0 if beta0 == -1 else beta0)) * 2 / 7 * meff * speed, mu * jn)
+    p = jn * n - (jt / speed * ut if speed > 0 else 0.0)
+    w1n = w1 - r1 / (0.4 * m1 * r1 ** 2) * np.cross(n, p)
+    w2n = w2 if not inv2 else w2 - r2 / (0.4 * m2 * r2 ** 2) * np.cross(n, p)
+    return v1 + p / m1, v2 - p * inv2, w1n, w2n

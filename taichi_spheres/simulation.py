@@ -289,6 +289,10 @@ class Simulation:
 
     def state(self) -> State:
         """Numpy (float64) copy of positions, velocities, radii, masses and time."""
+        if self.n == 0:
+            empty = np.zeros((0, 3))
+            return State(x=empty, v=empty, radius=np.zeros(0), mass=np.zeros(0),
+                         time=self.time, omega=empty)
         self._check()
         return State(x=self._engine.state.positions(), v=self._engine.state.velocities(),
                      radius=self.scene.radius.copy(), mass=self.scene.mass.copy(),
@@ -310,15 +314,14 @@ class Simulation:
 
     def checkpoint(self) -> dict:
         """Everything needed to continue bit-for-bit: state, time, step bound, counters."""
-        self._check()
-        return dict(x=self._engine.state.positions(), v=self._engine.state.velocities(),
-                    omega=self._engine.state.spins(), radius=self.scene.radius.copy(),
+        st = self.state()
+        return dict(x=st.x, v=st.v, omega=st.omega, radius=self.scene.radius.copy(),
                     mass=self.scene.mass.copy(), sphere_ids=self.sphere_ids.copy(),
                     time=self.time,
                     vmax2=self._vmax2, totals=dict(self._totals),
                     last_step=dict(self.last_step), n=self.n, precision=self.precision,
                     step_fraction=self.step_fraction, max_sweeps=self.max_sweeps,
-                    warm=self._warm_rows())
+                    warm=self._warm_rows() if self.n else None)
 
     def restore(self, ckpt: dict) -> None:
         """Continue from :meth:`checkpoint` output of a Simulation of the same scene,
@@ -347,10 +350,14 @@ class Simulation:
 
     def advance_to(self, t_end: float) -> None:
         """Advance to the absolute time ``t_end`` [s]; the last step ends exactly there."""
-        self._check()
+        if self.n:
+            self._check()
         t_end = float(t_end)
         if not math.isfinite(t_end) or t_end < self.time:
             raise ValueError(f"cannot advance to t={t_end} from t={self.time}")
+        if self.n == 0:
+            self.time = t_end
+            return
         t0 = _time.perf_counter()
         while self.time < t_end:
             h = self.max_step()
@@ -359,7 +366,7 @@ class Simulation:
             if last:
                 h = remaining
             self.step(h)
-            self.time = t_end if last else self.time + h
+            self.time = t_end if last or self.n == 0 else self.time + h
         self.sim_seconds += _time.perf_counter() - t0
 
     def max_step(self) -> float:
@@ -372,6 +379,8 @@ class Simulation:
 
     def step(self, h: float) -> None:
         """One step of length h [s] (does not advance ``time``; use advance)."""
+        if self.n == 0:
+            return
         self._check()
         c, sweeps, remaining, overlap = self._stepper.step(h, self.max_sweeps)
         self._book_step(c, h, sweeps, remaining, overlap)
@@ -407,6 +416,9 @@ class Simulation:
         self.scene = scene
         self._parked = rows + (warm,)
         self._engine.release(self)
+        if scene.n == 0:           # every sphere has left: time still runs, nothing moves
+            self._vmax2 = 0.0
+            return
         self._bind()
         self._measure_vmax()
 

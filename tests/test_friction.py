@@ -14,30 +14,11 @@ import pytest
 
 import taichi_spheres as ts
 from taichi_spheres import observe
+from taichi_spheres.reference import walton_impact
 
 from conftest import tol
 
 G = 9.81
-
-
-def walton(v1, v2, w1, w2, r1, r2, m1, m2, n, e, mu, beta0):
-    """Velocities and spins after an impact of spheres 1 and 2 touching along n (from 2
-    to 1) by Walton's model (Foerster et al. 1994); m2 = inf for a wall (v2 = w2 = 0)."""
-    inv2 = 0.0 if math.isinf(m2) else 1.0 / m2
-    meff = 1.0 / (1.0 / m1 + inv2)
-    uc = v1 - v2 - np.cross(r1 * w1 + r2 * w2, n)
-    un = uc @ n
-    ut = uc - un * n
-    jn = -(1 + e) * meff * un
-    beta_max = 0.0 if beta0 == -1.0 else beta0
-    speed = np.linalg.norm(ut)
-    jt = min((1 + beta_max) * 2 / 7 * meff * speed, mu * jn)
-    p = jn * n - (jt / speed * ut if speed > 0 else 0)
-    i1 = 0.4 * m1 * r1 ** 2
-    out = [v1 + p / m1, v2 - p * inv2, w1 - r1 / i1 * np.cross(n, p), w2]
-    if inv2:
-        out[3] = w2 - r2 / (0.4 * m2 * r2 ** 2) * np.cross(n, p)
-    return out
 
 
 def _one(x, v, r, omega=None, box=((0, 0, 0), (1, 1, 1)), **kw):
@@ -93,7 +74,7 @@ def test_sphere_on_incline(arch, precision, degrees):
                                        (-1.0, (0, 0, 0))])
 def test_oblique_pair_impact_follows_walton(arch, beta0, w1):
     """Two spheres of glass-like e, mu (Foerster et al. 1994) meeting obliquely, in the
-    sticking (large spin) and sliding regimes: velocities and spins after the impact
+    sticking and sliding (large spin) regimes: velocities and spins after the impact
     equal Walton's closed form, and the total angular momentum (orbital + spin) is
     conserved, to round-off."""
     e, mu = 0.97, 0.092
@@ -113,7 +94,7 @@ def test_oblique_pair_impact_follows_walton(arch, beta0, w1):
     sim.advance(1e-3)
     st = sim.state()
     assert sim.stats["pair_collisions"] == 1
-    want = walton(v[0], v[1], w[0], w[1], r[0], r[1], m[0], m[1], n, e, mu, beta0)
+    want = walton_impact(v[0], v[1], w[0], w[1], r[0], r[1], m[0], m[1], n, e, mu, beta0)
     scale = np.abs(v).max()
     for got, exp in zip((st.v[0], st.v[1]), want[:2]):
         assert np.abs(got - exp).max() < 1e-12 * scale
@@ -137,7 +118,7 @@ def test_oblique_wall_impact_follows_walton(arch, w0):
     sim.advance(0.01)
     st = sim.state()
     m = 1000 * 4 / 3 * np.pi * r ** 3
-    want = walton(v, np.zeros(3), np.array(w0, float), np.zeros(3), r, 0.0, m, math.inf,
+    want = walton_impact(v, np.zeros(3), np.array(w0, float), np.zeros(3), r, 0.0, m, math.inf,
                   np.array([0.0, 0.0, 1.0]), e, mu, beta0)
     assert sim.stats["wall_collisions"] == 1
     assert np.abs(st.v[0] - want[0]).max() < 1e-13
@@ -250,3 +231,28 @@ def test_recycled_spheres_reenter_at_the_top(arch):
     assert sim.n == n0 and sim.stats["discharged"] > 0
     st = sim.state()
     assert np.all(st.x[:, 2] >= 0.03)          # none left in the sink
+
+
+def test_checkpoint_after_a_discharge_and_an_empty_simulation(arch):
+    """A checkpoint taken after a sink took a sphere out restores into a Simulation of
+    the original scene and continues bit for bit; once every sphere has left, time
+    still runs and the energy is all booked as discharged."""
+    x = np.array([[0.5, 0.5, 0.15], [0.2, 0.5, 0.6]])
+    scene = ts.Scene.from_arrays(x, np.zeros_like(x), 0.02, gravity=(0, 0, -9.81),
+                                 restitution=0.5, wall_restitution=0.5, friction=0.3,
+                                 sinks=[ts.Sink((0, 0, 0), (1, 1, 0.1))])
+    sim = ts.Simulation(scene, arch=arch, precision="f64")
+    sim.advance(0.2)
+    assert sim.n == 1 and sim.stats["discharged"] == 1
+    assert sim.sphere_ids.tolist() == [1]
+    cp = sim.checkpoint()
+    other = ts.Simulation(scene, arch=arch, precision="f64")
+    other.restore(cp)
+    sim.advance(0.1)
+    other.advance(0.1)
+    assert np.array_equal(sim.state().x, other.state().x)
+    sim.advance(1.0)
+    assert sim.n == 0 and sim.time == pytest.approx(1.3)
+    budget = sim.energy_budget()
+    assert budget["current"] == 0.0
+    assert abs(budget["unaccounted"]) < 1e-12 * budget["initial"]

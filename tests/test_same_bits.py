@@ -31,8 +31,8 @@ with open(os.path.join(os.path.dirname(__file__), "same_bits.json")) as _f:
 
 def _digest(case, precision, arch="cpu", **kw):
     """(digest, Simulation) of the reference scene of ``case`` after its run."""
-    sim = ts.Simulation(same_bits_scene(STORED[case]["n"]), arch=arch, precision=precision,
-                        **kw)
+    sim = ts.Simulation(same_bits_scene(STORED[case]["n"], STORED[case].get("frictional", False)),
+                        arch=arch, precision=precision, **kw)
     sim.advance(STORED[case]["duration"])
     return ts.observe.state_digest(sim.state(), precision), sim
 
@@ -43,7 +43,7 @@ def _cpu_only(arch):
                     "their runs with each other)")
 
 
-@pytest.mark.parametrize("case", ["small", "large"])
+@pytest.mark.parametrize("case", ["small", "large", "frictional"])
 def test_reference_scenes_give_the_stored_digests(arch, precision, case):
     _cpu_only(arch)
     digest, sim = _digest(case, precision)
@@ -51,11 +51,12 @@ def test_reference_scenes_give_the_stored_digests(arch, precision, case):
     assert digest == STORED[case]["digests"][precision]
 
 
-def test_fused_step_gives_the_stored_digest(arch):
+@pytest.mark.parametrize("case", ["small", "frictional"])
+def test_fused_step_gives_the_stored_digest(arch, case):
     _cpu_only(arch)
-    digest, sim = _digest("small", "f64", fused=True)
+    digest, sim = _digest(case, "f64", fused=True)
     assert sim.fused
-    assert digest == STORED["small"]["digests"]["f64"]
+    assert digest == STORED[case]["digests"]["f64"]
 
 
 def test_parallel_colour_launches_give_the_stored_digest(arch, monkeypatch):

@@ -6,7 +6,8 @@ CPU, in both compile modes, fused or kernel by kernel, with serial or parallel
 colour launches. This script runs ``builders.same_bits_scene(n)`` for each case of
 ``tests/same_bits.json`` ("small": 400 spheres for 0.8 s, ~1,000 steps, piling up on
 the floor; "large": 3,000 spheres, where detection keeps near lists and sweeps can
-launch per colour) and prints the digest of the final positions and velocities
+launch per colour; "frictional": the small case with friction, spin and a post of
+static geometry) and prints the digest of the final positions and velocities
 (``observe.state_digest``) with the collision counts, for each path asked for, and
 whether it matches the digest stored there (``tests/test_same_bits.py`` holds the
 engine to it).
@@ -50,7 +51,8 @@ def run_path(case: dict, precision: str, path: str, threads=None, compile=None) 
     runtime.ensure("cpu", precision, threads=threads, compile=compile)
     tuning = DEFAULT.with_(few_pairs=-1, serial_resolve_pairs=-1) if path == "parallel" \
         else DEFAULT
-    sim = ts.Simulation(same_bits_scene(case["n"]), precision=precision, threads=threads,
+    sim = ts.Simulation(same_bits_scene(case["n"], case.get("frictional", False)),
+                        precision=precision, threads=threads,
                         fused=path == "fused", tuning=tuning)
     sim.advance(case["duration"])
     s = sim.stats
@@ -61,7 +63,8 @@ def run_path(case: dict, precision: str, path: str, threads=None, compile=None) 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--cases", nargs="+", default=["small", "large"], choices=["small", "large"])
+    p.add_argument("--cases", nargs="+", default=["small", "large", "frictional"],
+                   choices=["small", "large", "frictional"])
     p.add_argument("--precisions", nargs="+", default=["f64", "f32"], choices=["f64", "f32"])
     p.add_argument("--paths", nargs="+", default=["default"], choices=PATHS)
     p.add_argument("--compile", default=None, choices=["fast", "optimized"])

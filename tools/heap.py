@@ -1,0 +1,136 @@
+#!/usr/bin/env python3
+"""Angle of repose of a heap poured on a floor, as a function of sliding friction mu and
+rolling friction mu_r.
+
+Each run loads a heap scene (default scenes/heap.toml: spheres run out of a funnel onto
+the floor), sets the pair and wall friction to mu and the rolling friction to mu_r,
+simulates until ``--duration`` s (or until the kinetic energy per sphere falls below
+``--rest`` J after the funnel has emptied), and measures the angle from the heap's
+surface profile: around the heap's axis (the spheres' mean x, y), the top z + r of the
+highest sphere in radial bins one diameter wide; a straight line fitted to that profile
+between 20 % and 80 % of the heap's height (no cap, no toe) gives the slope, and the
+angle of repose is atan(-slope).
+
+    python tools/heap.py                               # mu in 0.3 0.5 0.7, mu_r in 0 0.1
+    python tools/heap.py --mu 0.5 --mu-r 0.1 --no-write
+    python tools/heap.py --write                       # the 'heap' section of docs/granular.md
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+sys.path.insert(0, os.path.dirname(__file__))
+
+import taichi_spheres as ts  # noqa: E402
+from taichi_spheres.geometry import with_material  # noqa: E402
+from machine import cpu_name, write_section  # noqa: E402  (tools/machine.py)
+
+DOCS = os.path.join(os.path.dirname(__file__), "..", "docs")
+
+
+def surface_profile(x, radius, centre, bin_width) -> tuple:
+    """(bin centres [m], heights [m]): the highest z + r per radial bin around centre."""
+    rho = np.hypot(x[:, 0] - centre[0], x[:, 1] - centre[1])
+    top = x[:, 2] + radius
+    bins = np.floor(rho / bin_width).astype(int)
+    edges, heights = [], []
+    for b in range(bins.max() + 1):
+        sel = bins == b
+        if sel.any():
+            edges.append((b + 0.5) * bin_width)
+            heights.append(top[sel].max())
+    return np.array(edges), np.array(heights)
+
+
+def repose_angle(x, radius, floor=0.0, below=math.inf) -> tuple:
+    """(angle [deg], height [m], samples) of the heap of the spheres x (N, 3), radii (N,)
+    below z = ``below`` (not those left in a funnel) on a floor at z = floor (module
+    docstring); nan with fewer than 3 bins on the slope."""
+    on_floor = x[:, 2] < below
+    centre = x[on_floor, :2].mean(axis=0)
+    rho, height = surface_profile(x[on_floor], radius[on_floor], centre, 2 * radius.max())
+    height = height - floor
+    top = height.max()
+    use = (height > 0.2 * top) & (height < 0.8 * top)
+    if use.sum() < 3:
+        return math.nan, float(top), int(use.sum())
+    slope = np.polyfit(rho[use], height[use], 1)[0]
+    return float(math.degrees(math.atan(-slope))), float(top), int(use.sum())
+
+
+def run_heap(scene, mu, mu_r, duration, rest, threads, below) -> dict:
+    """Simulate the heap scene with friction mu and rolling friction mu_r; returns the
+    angle, heap height, time, wall seconds and the largest overlap."""
+    shapes = [with_material(g, g.restitution, mu) for g in scene.geometry]
+    scene = scene.replace(friction=mu, wall_friction=None, rolling_friction=mu_r,
+                          geometry=shapes)
+    sim = ts.Simulation(scene, threads=threads)
+    t0 = time.perf_counter()
+    while sim.time < duration - 1e-12:
+        sim.advance(0.1)
+        st = sim.state()
+        ke = ts.observe.kinetic_energy(st) / st.x.shape[0]
+        if sim.time > 0.5 * duration and ke < rest:
+            break
+    seconds = time.perf_counter() - t0
+    st = sim.state()
+    angle, height, samples = repose_angle(st.x, st.radius, float(scene.box_lo[2]), below)
+    return dict(mu=mu, mu_r=mu_r, angle=angle, height=height, samples=samples,
+                time=sim.time, wall_seconds=seconds, max_overlap=sim.stats["max_overlap"],
+                ke_per_sphere=float(ts.observe.kinetic_energy(st) / st.x.shape[0]))
+
+
+def report(rows, argv, threads, scene_path) -> str:
+    """Markdown table of the runs (docs/granular.md section 'heap')."""
+    lines = [f"Measured {datetime.date.today()} on {cpu_name()}, {threads} thread(s): "
+             f"`python tools/heap.py {' '.join(argv)}`".rstrip(),
+             "", f"Scene `{scene_path}`; angle from the surface profile between 20 % and "
+                 "80 % of the heap's height.", "",
+             "| mu | mu_r | angle of repose [deg] | heap height [mm] | simulated [s] | "
+             "wall [s] | max overlap / d |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['mu']:g} | {r['mu_r']:g} | {r['angle']:.1f} | "
+                     f"{1e3 * r['height']:.1f} | {r['time']:.2f} | {r['wall_seconds']:.0f} | "
+                     f"{r['max_overlap']:.1e} |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--scene", default=os.path.join(os.path.dirname(__file__), "..", "scenes",
+                                                   "heap.toml"))
+    p.add_argument("--mu", type=float, nargs="+", default=[0.3, 0.5, 0.7])
+    p.add_argument("--mu-r", type=float, nargs="+", default=[0.0, 0.1])
+    p.add_argument("--duration", type=float, default=3.0, help="longest run [s]")
+    p.add_argument("--rest", type=float, default=1e-9, help="kinetic energy per sphere "
+                   "[J] below which the heap counts as settled")
+    p.add_argument("--below", type=float, default=0.18, help="spheres above this height "
+                   "[m] (in the funnel) are not part of the heap")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--write", action="store_true")
+    p.add_argument("--no-write", dest="write", action="store_false")
+    a = p.parse_args(argv)
+    scene = ts.load_scene(a.scene)
+    rows = []
+    for mu in a.mu:
+        for mu_r in a.mu_r:
+            rows.append(run_heap(scene, mu, mu_r, a.duration, a.rest, a.threads, a.below))
+            print(rows[-1], flush=True)
+    text = report(rows, [x for x in argv if x != "--write"], a.threads,
+                  os.path.relpath(a.scene, os.path.join(os.path.dirname(__file__), "..")))
+    print(text)
+    if a.write:
+        write_section(os.path.join(DOCS, "granular.md"), "heap", text)
+
+
+if __name__ == "__main__":
+    main()

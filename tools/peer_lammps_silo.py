@@ -1,0 +1,97 @@
+#!/usr/bin/env python3
+"""Silo discharge side by side with LAMMPS (GRANULAR, Hertz-Mindlin): the same lattice
+fill, the same silo, orifice, restitution and friction, one thread each.
+
+Both codes start from the same jittered lattice (tools/silo.py ``fill_positions``),
+settle it with the orifice closed for ``--settle`` s (untimed), open the orifice and
+discharge for ``--duration`` s. taichi_spheres: hard spheres, the contact solver,
+Walton impacts (tools/silo.py's scene). LAMMPS: tools/lammps_silo.py (Hertz with
+E = 5e9 Pa, nu = 0.3, damping by coefficient of restitution, Mindlin tangential force
+with the same mu, dt = 5e-6 s, a thin plate with an orifice and a cylinder wall as
+fix wall/gran/region). Reported per code: the steady discharge rate (least squares over
+[--transient, duration], tools/silo.py ``steady_rate``), spheres discharged, wall
+seconds per simulated second of the discharge, and their ratios.
+
+    python tools/peer_lammps_silo.py                    # ~5 min on 2 cores
+    python tools/peer_lammps_silo.py --write            # the 'lammps' section of docs/granular.md
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, HERE)
+
+import lammps_silo  # noqa: E402  (tools/lammps_silo.py)
+import silo  # noqa: E402  (tools/silo.py)
+from machine import cpu_name, write_section  # noqa: E402
+
+
+def taichi_run(a, x):
+    """(times, discharged mass, wall seconds, discharged count) of taichi_spheres."""
+    settled = silo.settled_fill(a, a.fill, seed=1)
+    times, mass, seconds, sim = silo.discharge(a, settled, a.orifice * a.radius)
+    return times, mass, seconds, int(sim.stats["discharged"]), len(settled[0])
+
+
+def lammps_run(a, x):
+    """The same for LAMMPS from the lattice x."""
+    c = a.silo_radius + 0.005
+    radius = np.full(len(x), a.radius)
+    mass = 2500.0 * 4 / 3 * math.pi * radius ** 3
+    out = lammps_silo.run_silo(
+        x, radius, mass, silo_radius=a.silo_radius, orifice_radius=a.orifice * a.radius,
+        floor_z=0.05, top_z=0.05 + a.fill * 2.5, box_lo=(0, 0, 0),
+        box_hi=(2 * c, 2 * c, 0.05 + a.fill * 2.5), e=0.5, mu=a.mu, mu_roll=0.0,
+        duration=a.duration, sample_every=a.sample, settle=a.settle, threads=1)
+    return (np.asarray(out["times"]), np.asarray(out["discharged_mass"]), out["wall_s"],
+            int(out["discharged_count"][-1]), out["lammps_version"])
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--orifice", type=float, default=5.0, help="orifice diameter / d")
+    p.add_argument("--write", action="store_true")
+    own, rest = p.parse_known_args(argv)
+    a = silo.parse(["--radius", "0.003", "--silo-radius", "0.045", "--fill", "0.09",
+                    "--settle", "0.3", "--duration", "0.6", "--threads", "1"] + rest)
+    a.orifice = own.orifice              # D / d, so that the orifice radius is D/d x r
+    c = a.silo_radius + 0.005
+    x = silo.fill_positions(a.silo_radius, a.radius, a.fill, 0.05, np.array([c, c]), 1)
+    rows = {}
+    t_times, t_mass, t_wall, t_count, n = taichi_run(a, x)
+    total = n * 2500.0 * 4 / 3 * math.pi * a.radius ** 3
+    rows["taichi_spheres"] = (silo.steady_rate(t_times, t_mass, total, a.transient)[0], t_count,
+                              t_wall / (t_times[-1] - t_times[0]))
+    l_times, l_mass, l_wall, l_count, version = lammps_run(a, x)
+    rows[version] = (silo.steady_rate(l_times, l_mass, total, a.transient)[0], l_count,
+                     l_wall / a.duration)
+    lines = [f"Measured {datetime.date.today()} on {cpu_name()}, 1 thread each: "
+             f"`python tools/peer_lammps_silo.py {' '.join(x for x in argv if x != '--write')}`".rstrip(),
+             "", f"{n} spheres of d = {2e3 * a.radius:g} mm (2500 kg/m^3, e = 0.5, mu = "
+                 f"{a.mu}), silo radius {1e3 * a.silo_radius:g} mm, orifice D = "
+                 f"{own.orifice:g} d, settled {a.settle} s, discharge {a.duration} s, rate "
+                 f"fitted from {a.transient} s.", "",
+             "| code | rate [kg/s] | discharged | wall s / sim s |", "|---|---|---|---|"]
+    for name, (rate, count, wall) in rows.items():
+        lines.append(f"| {name} | {rate:.4g} | {count} | {wall:.1f} |")
+    (rt, _, wt), (rl, _, wl) = rows.values()
+    lines += ["", f"Rate taichi_spheres / LAMMPS = {rt / rl:.3f}; LAMMPS / taichi_spheres "
+                  f"wall time = {wl / wt:.2f}x."]
+    text = "\n".join(lines)
+    print(text)
+    if own.write:
+        write_section(os.path.join(silo.DOCS, "granular.md"), "lammps", text)
+
+
+if __name__ == "__main__":
+    main()
