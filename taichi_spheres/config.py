@@ -28,6 +28,9 @@ class Rules:
         touching or nearly touching pair (or wall) is a persistent contact, a row of
         the contact solver (contacts/solver.py). A scene's ``rest_speed`` raises that
         threshold.
+    contact_margin: pairs and walls closer than contact_margin x D get contact rows
+        (speculative contacts: two spheres close by at most 2 D in a step), or closer
+        than the grid's slack if that is smaller.
     contact_tolerance: the contact solver iterates until no row changes a velocity by
         more than this fraction of the impact speed.
     contact_iterations: velocity sweeps of the contact solver per step at most.
@@ -51,6 +54,7 @@ class Rules:
     """
 
     impact_factor: float = 2.0
+    contact_margin: float = 2.5
     contact_tolerance: float = 1e-6
     contact_iterations: int = 100
     warm_start: bool = True

@@ -151,12 +151,13 @@ class Engine:
         return self._occupant is not None and self._occupant() is sim
 
     def bind(self, sim, x, v, geom: GridGeometry, rest_speed: float, warm=None,
-             omega=None) -> None:
+             omega=None, reach=None) -> None:
         """Make ``sim`` the Simulation these fields hold: park the previous one's
         positions, velocities, spins and contact impulses on the host (its ``_park``),
         then load ``sim``'s scene, x, v [(n, 3)], grid geometry, rest speed [m/s], the
-        contact solver's warm start (``warm``: ContactSolver.warm_rows, or None) and the
-        spins omega [(n, 3) rad/s, or None: zero]."""
+        contact solver's warm start (``warm``: ContactSolver.warm_rows, or None), the
+        spins omega [(n, 3) rad/s, or None: zero] and the contact rows' reach [m] (the
+        speculative margin, at most the grid's slack; None: the slack)."""
         previous = self._occupant() if self._occupant is not None else None
         if previous is not None and previous is not sim:
             previous._park()
@@ -166,7 +167,7 @@ class Engine:
         self.grid.bind(geom)
         self.contacts.bind(scene, geom)
         if self.solver is not None:
-            self.solver.bind(scene, geom)
+            self.solver.bind(scene, geom, reach)
             if warm is not None:
                 self.solver.load_warm(warm)
         self._occupant = weakref.ref(sim)

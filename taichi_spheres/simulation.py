@@ -464,7 +464,9 @@ class Simulation:
         """Load this Simulation into its engine's fields unless it is the one they hold."""
         if not self._engine.bound_to(self):
             x, v, omega, warm = self._parked
-            self._engine.bind(self, x, v, self.geometry, self.rest_speed, warm, omega)
+            reach = self.tuning.physics.contact_margin * self.step_fraction * \
+                float(self.scene.radius.min())
+            self._engine.bind(self, x, v, self.geometry, self.rest_speed, warm, omega, reach)
             self._parked = None
 
     def _park(self):

@@ -214,7 +214,9 @@ def main(argv=None):
     if a.json:
         with open(a.json, "w") as fh:
             json.dump(out, fh, indent=1)
-    text = report(out, [x for x in argv if x not in ("--write",)])
+    shown = [x for k, x in enumerate(argv) if x != "--write" and x != "--json"
+             and (k == 0 or argv[k - 1] != "--json")]
+    text = report(out, shown)
     print(text)
     if a.write:
         write_section(os.path.join(DOCS, "granular.md"), "silo", text)

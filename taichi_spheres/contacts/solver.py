@@ -136,9 +136,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
         self.n_colours_f = ti.field(ti.i32, shape=())
         self.tol_len = ti.field(real, shape=())      # position tolerance [m] (bind)
 
-    def bind(self, scene, geom):
-        """Load a scene's grid geometry ``geom`` (colours, margin: the grid's slack) and
-        forget the warm start."""
+    def bind(self, scene, geom, reach=None):
+        """Load a scene's grid geometry ``geom`` (colours; the speculative margin: the
+        grid's slack, or ``reach`` [m] if smaller) and forget the warm start."""
         colours = geom.colours
         table = np.zeros((MAX_COLOURS, 3, 3), dtype=np.int32)
         table[:len(colours)] = np.array(colours, dtype=np.int32)
@@ -147,7 +147,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
         self.n_colours_f[None] = len(colours)
         # a tenth of the overlap tolerance of the smallest contact distance [m]
         self.tol_len[None] = 0.1 * self.rules.overlap_tolerance * 2.0 * float(scene.radius.min())
-        self.margin[None] = geom.slack
+        self.margin[None] = geom.slack if reach is None else min(geom.slack, reach)
         self.h_prev[None] = 0
         self.warm_n.fill(0)
         self.state.loaded.fill(0)
