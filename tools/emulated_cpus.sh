@@ -8,6 +8,7 @@
 #
 #   bash tools/emulated_cpus.sh                       # installs qemu-user with apt-get
 #   bash tools/emulated_cpus.sh Nehalem Haswell-noTSX
+#   CASES="small frictional" PRECISIONS=f64 bash tools/emulated_cpus.sh   # other cases
 set -euo pipefail
 cd "$(dirname "$0")/.."
 command -v qemu-x86_64 >/dev/null || { apt-get update -qq && apt-get install -y -qq qemu-user; }
@@ -26,7 +27,7 @@ for cpu in native "${models[@]}"; do
   fi
   echo "## $cpu"
   TAICHI_SPHERES_COMPILE=fast TI_OFFLINE_CACHE_FILE_PATH=$cache \
-    "${run[@]}" tools/state_digest.py --cases small --precisions f64 f32 2>/dev/null | grep '^{' || true
+    "${run[@]}" tools/state_digest.py --cases ${CASES:-small} --precisions ${PRECISIONS:-f64 f32} 2>/dev/null | grep '^{' || true
   echo "# $cpu: $(( $(date +%s) - start )) s"
   rm -rf "$cache"
 done

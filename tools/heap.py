@@ -1,15 +1,16 @@
 #!/usr/bin/env python3
-"""Angle of repose of a heap poured on a floor, as a function of sliding friction mu and
-rolling friction mu_r.
+"""Angle of repose of a heap poured on a round platform, as a function of sliding
+friction mu and rolling friction mu_r.
 
 Each run loads a heap scene (default scenes/heap.toml: spheres run out of a funnel onto
-the floor), sets the pair and wall friction to mu and the rolling friction to mu_r,
-simulates until ``--duration`` s (or until the kinetic energy per sphere falls below
-``--rest`` J after the funnel has emptied), and measures the angle from the heap's
-surface profile: around the heap's axis (the spheres' mean x, y), the top z + r of the
-highest sphere in radial bins one diameter wide; a straight line fitted to that profile
-between 20 % and 80 % of the heap's height (no cap, no toe) gives the slope, and the
-angle of repose is atan(-slope).
+a round platform, the excess running over its edge onto the floor), sets the pair,
+wall and geometry friction to mu and the rolling friction to mu_r, simulates until
+``--duration`` s (or until the kinetic energy per sphere falls below ``--rest`` J after
+half of it), and measures the angle from the heap's surface profile: around the
+platform's axis, the top z + r of the highest sphere on the platform in radial bins
+one diameter wide; a straight line fitted to that profile between 20 % and 80 % of the
+heap's height above the platform (no cap, no toe) gives the slope, and the angle of
+repose is atan(-slope).
 
     python tools/heap.py                               # mu in 0.3 0.5 0.7, mu_r in 0 0.1
     python tools/heap.py --mu 0.5 --mu-r 0.1 --no-write
@@ -50,12 +51,15 @@ def surface_profile(x, radius, centre, bin_width) -> tuple:
     return np.array(edges), np.array(heights)
 
 
-def repose_angle(x, radius, floor=0.0, below=math.inf) -> tuple:
+def repose_angle(x, radius, floor=0.0, below=math.inf, centre=None, within=math.inf) -> tuple:
     """(angle [deg], height [m], samples) of the heap of the spheres x (N, 3), radii (N,)
-    below z = ``below`` (not those left in a funnel) on a floor at z = floor (module
-    docstring); nan with fewer than 3 bins on the slope."""
-    on_floor = x[:, 2] < below
-    centre = x[on_floor, :2].mean(axis=0)
+    between z = floor and z = ``below`` (not those left in a funnel), within ``within``
+    [m] of the heap's axis through ``centre`` (x, y; None: the spheres' mean), on a base
+    at z = floor (module docstring); nan with fewer than 3 bins on the slope."""
+    if centre is None:
+        centre = x[x[:, 2] < below, :2].mean(axis=0)
+    rho = np.hypot(x[:, 0] - centre[0], x[:, 1] - centre[1])
+    on_floor = (x[:, 2] < below) & (x[:, 2] > floor) & (rho < within)
     rho, height = surface_profile(x[on_floor], radius[on_floor], centre, 2 * radius.max())
     height = height - floor
     top = height.max()
@@ -66,7 +70,7 @@ def repose_angle(x, radius, floor=0.0, below=math.inf) -> tuple:
     return float(math.degrees(math.atan(-slope))), float(top), int(use.sum())
 
 
-def run_heap(scene, mu, mu_r, duration, rest, threads, below) -> dict:
+def run_heap(scene, mu, mu_r, duration, rest, threads, base) -> dict:
     """Simulate the heap scene with friction mu and rolling friction mu_r; returns the
     angle, heap height, time, wall seconds and the largest overlap."""
     shapes = [with_material(g, g.restitution, mu) for g in scene.geometry]
@@ -82,7 +86,7 @@ def run_heap(scene, mu, mu_r, duration, rest, threads, below) -> dict:
             break
     seconds = time.perf_counter() - t0
     st = sim.state()
-    angle, height, samples = repose_angle(st.x, st.radius, float(scene.box_lo[2]), below)
+    angle, height, samples = repose_angle(st.x, st.radius, **base)
     return dict(mu=mu, mu_r=mu_r, angle=angle, height=height, samples=samples,
                 time=sim.time, wall_seconds=seconds, max_overlap=sim.stats["max_overlap"],
                 ke_per_sphere=float(ts.observe.kinetic_energy(st) / st.x.shape[0]))
@@ -113,8 +117,11 @@ def main(argv=None):
     p.add_argument("--duration", type=float, default=3.0, help="longest run [s]")
     p.add_argument("--rest", type=float, default=1e-9, help="kinetic energy per sphere "
                    "[J] below which the heap counts as settled")
-    p.add_argument("--below", type=float, default=0.18, help="spheres above this height "
+    p.add_argument("--below", type=float, default=0.195, help="spheres above this height "
                    "[m] (in the funnel) are not part of the heap")
+    p.add_argument("--base", type=float, nargs=4, default=(0.14, 0.15, 0.15, 0.06),
+                   metavar=("Z", "X", "Y", "RADIUS"), help="the heap's base: its height "
+                   "[m], centre (x, y) [m] and radius [m] (scenes/heap.toml's platform)")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--write", action="store_true")
     p.add_argument("--no-write", dest="write", action="store_false")
@@ -123,7 +130,8 @@ def main(argv=None):
     rows = []
     for mu in a.mu:
         for mu_r in a.mu_r:
-            rows.append(run_heap(scene, mu, mu_r, a.duration, a.rest, a.threads, a.below))
+            base = dict(floor=a.base[0], below=a.below, centre=a.base[1:3], within=a.base[3])
+            rows.append(run_heap(scene, mu, mu_r, a.duration, a.rest, a.threads, base))
             print(rows[-1], flush=True)
     text = report(rows, [x for x in argv if x != "--write"], a.threads,
                   os.path.relpath(a.scene, os.path.join(os.path.dirname(__file__), "..")))
