@@ -25,7 +25,8 @@ Units are SI, z is up. docs/scenes.md lists every key and its default.
                  (lo, hi), radius (radius_spread p: uniform in radius * [1-p, 1]),
                  mass|density, v | speed, seed
     [physics] also: friction, wall_friction, tangential_restitution, rolling_friction;
-    [[spheres]] also omega (rad/s)
+    [[spheres]], [[lattice]], [[pour]], [[random]] also omega (rad/s; one vector for all
+    the spheres of a table); [[pour]] and [[random]] place spheres clear of geometry
     [[plane]], [[cylinder]], [[cone]], [[sink]]: static geometry and sinks
                  (scenegeometry.py; keys as ts.Plane, ts.Cylinder, ts.Cone, ts.Sink)
 """
@@ -67,12 +68,13 @@ _SPHERE = {"colour": "vec3", "x": "vec3", "v": "vec3", "radius": float, "mass": 
            "density": float, "omega": "vec3"}
 _LATTICE = {"colour": "vec3", "v_spread": float, "lo": "vec3", "hi": "vec3", "spacing": float, "radius": float,
             "mass": float,
-            "density": float, "v": "vec3", "speed": float, "seed": int}
+            "density": float, "v": "vec3", "speed": float, "seed": int, "omega": "vec3"}
 _POUR = {"colour": "vec3", "count": int, "lo": "vec3", "hi": "vec3", "radius": float,
-         "mass": float, "density": float, "v": "vec3", "v_spread": float, "seed": int}
+         "mass": float, "density": float, "v": "vec3", "v_spread": float, "seed": int,
+         "omega": "vec3"}
 _RANDOM = {"colour": "vec3", "radius_spread": float, "v_spread": float, "count": int, "lo": "vec3", "hi": "vec3", "radius": float,
            "mass": float,
-           "density": float, "v": "vec3", "speed": float, "seed": int}
+           "density": float, "v": "vec3", "speed": float, "seed": int, "omega": "vec3"}
 
 
 class SceneFileError(ValueError):
@@ -535,7 +537,7 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=Fals
         radius = float(item["radius"]) * (1.0 - spread * rng.random(count))
         x = random_positions(count, radius, lo, hi, rng,
                              existing=(arrays["x"], arrays["radius"]),
-                             box=(box_lo, box_hi), periodic=periodic)
+                             box=(box_lo, box_hi), periodic=periodic, shapes=shapes)
     if kind != "random":
         radius = np.full(count, float(item["radius"]))
     arrays["x"].append(x)
@@ -548,7 +550,7 @@ def _generate(kind, where, item, box_lo, box_hi, arrays, problems, periodic=Fals
 
 
 def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=200,
-                     box=None, periodic=False):
+                     box=None, periodic=False, shapes=()):
     """count non-overlapping centres of spheres inside [lo, hi], (count, 3) [m]; radius
     is one number or one per sphere [m] (random sequential addition on a hash grid,
     largest first is not needed: raises if the region is too full).
@@ -556,7 +558,10 @@ def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=20
     existing: (list of (K, 3) centres, list of (K,) radii) of spheres already placed,
     kept clear of. box: (lo, hi) of the simulation box and periodic: bool or 3 bools;
     on periodic axes spheres near one face are also kept clear of the images of
-    spheres near the opposite face (minimum image), as :class:`Scene` checks."""
+    spheres near the opposite face (minimum image), as :class:`Scene` checks. shapes:
+    geometry objects (geometry.py) the spheres are kept clear of (gap >= 0); a draw
+    inside one uses up a try and draws nothing more, so a table places its spheres at
+    the same spots whenever the geometry rejects none of its draws."""
     radii = np.broadcast_to(np.asarray(radius, dtype=np.float64), (count,))
     if np.any(hi - lo < 2.0 * radii.max()):
         raise ValueError("region too small for one sphere")
@@ -568,21 +573,28 @@ def random_positions(count, radius, lo, hi, rng, existing=((), ()), max_tries=20
         placed.add(p, r)
     out = np.empty((count, 3))
     for k in range(count):
-        out[k] = _place_one(radii[k], lo, hi, rng, placed, max_tries, k, count)
+        out[k] = _place_one(radii[k], lo, hi, rng, placed, max_tries, k, count, shapes)
     return out
 
 
-def _place_one(radius, lo, hi, rng, placed, max_tries, k, count):
-    """A centre [m] for sphere k of count, of ``radius`` [m], uniform in [lo + r, hi - r]
-    and clear of every sphere ``placed`` (it is added there): up to max_tries draws of
-    rng.random(3); ValueError when none is clear."""
+def _place_one(radius, lo, hi, rng, placed, max_tries, k, count, shapes=()):
+    """A centre [m] for sphere k of count, of ``radius`` [m], uniform in [lo + r, hi - r],
+    clear of the geometry objects ``shapes`` and of every sphere ``placed`` (it is added
+    there): up to max_tries draws of rng.random(3); ValueError when none is clear."""
     for _ in range(max_tries):
         p = lo + radius + rng.random(3) * (hi - lo - 2.0 * radius)
-        if not placed.overlaps(p, radius):
+        if _clear_of(shapes, p, radius) and not placed.overlaps(p, radius):
             placed.add(p, radius)
             return p
-    raise ValueError(f"could not place sphere {k} of {count} without overlap after "
-                     f"{max_tries} tries: the region is too full")
+    raise ValueError(f"could not place sphere {k} of {count} without overlap"
+                     + (" or entering geometry" if shapes else "") + f" after {max_tries} tries: "
+                     "the region is too full")
+
+
+def _clear_of(shapes, p, radius) -> bool:
+    """Whether a sphere of ``radius`` [m] at p (3,) [m] has a gap >= 0 to every geometry
+    object in ``shapes``."""
+    return all(g.gap(p[None, :], radius)[0] >= 0 for g in shapes)
 
 
 class _PlacedSpheres:
