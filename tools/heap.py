@@ -97,7 +97,8 @@ def report(rows, argv, threads, scene_path) -> str:
     lines = [f"Measured {datetime.date.today()} on {cpu_name()}, {threads} thread(s): "
              f"`python tools/heap.py {' '.join(argv)}`".rstrip(),
              "", f"Scene `{scene_path}`; angle from the surface profile between 20 % and "
-                 "80 % of the heap's height.", "",
+                 "80 % of the heap's height above the platform. Wall time: the whole run, "
+                 "on a machine shared with other work.", "",
              "| mu | mu_r | angle of repose [deg] | heap height [mm] | simulated [s] | "
              "wall [s] | max overlap / d |", "|---|---|---|---|---|---|---|"]
     for r in rows:
