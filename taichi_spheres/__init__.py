@@ -12,10 +12,11 @@ import importlib.util
 
 from .scene import Scene
 from .geometry import Cone, Cylinder, Plane, Sink
+from .materials import Material
 from .scenefile import load_scene
 from . import observe
 
-__all__ = ["Scene", "Plane", "Cylinder", "Cone", "Sink", "Simulation", "State", "load_scene", "observe", "GSDWriter",
+__all__ = ["Scene", "Plane", "Cylinder", "Cone", "Sink", "Material", "Simulation", "State", "load_scene", "observe", "GSDWriter",
            "scene_from_gsd", "sweep", "__version__"]
 __version__ = "0.1.0"
 

@@ -6,6 +6,7 @@ import math
 import numpy as np
 
 from .geometry import Cylinder
+from .materials import Material
 from .scene import Scene
 
 __all__ = ["gas", "same_bits_scene"]
@@ -46,7 +47,7 @@ def gas(n, packing=0.3, radius=0.5, periodic=True, gravity=(0.0, 0.0, 0.0), rest
                              wall_restitution=wall_restitution, name=f"gas{n}")
 
 
-def same_bits_scene(n=400, frictional=False):
+def same_bits_scene(n=400, frictional=False, materials=False):
     """The reference scene of the same-bits promise (tests/test_same_bits.py,
     tools/state_digest.py): n spheres of radii 0.035-0.05 m and masses 0.5-2 kg on a
     jittered cubic lattice of spacing 0.125 m filling a cubic box (1 m for n <= 512),
@@ -58,7 +59,9 @@ def same_bits_scene(n=400, frictional=False):
     scene itself has the same bits on every machine. frictional: also friction 0.4
     (walls too), tangential restitution 0.3, rolling friction 0.05, and a vertical post
     (a cylinder of radius 0.01 m, spheres outside) at the box's centre: the spin,
-    Walton impacts, friction rows and geometry code paths."""
+    Walton impacts, friction rows and geometry code paths. materials (with frictional):
+    every other sphere of a second material (restitution 0.6, friction 0.2, no rolling
+    friction): the per-pair table lookups."""
     rng = np.random.default_rng(2024)
     side = 1
     while side ** 3 < n:
@@ -76,6 +79,10 @@ def same_bits_scene(n=400, frictional=False):
         extra = dict(friction=0.4, tangential_restitution=0.3, rolling_friction=0.05,
                      geometry=[Cylinder((centre, centre, 0.0), (0.0, 0.0, 1.0), 0.01,
                                         inside=False)])
+        if materials:
+            extra.update(materials=[Material("a"), Material("b", restitution=0.6, friction=0.2,
+                                                            rolling_friction=0.0)],
+                         material=np.arange(n) % 2)
     return Scene.from_arrays(x, v, radius, mass=mass, box=((0.0,) * 3, (side * spacing,) * 3),
                              periodic=(True, True, False), gravity=(0.0, 0.0, -9.81),
                              restitution=0.8, wall_restitution=0.9, name="same_bits", **extra)

@@ -31,6 +31,9 @@ def scene_digest(scene) -> str:
         h.update(repr((scene.friction, scene.wall_friction, scene.tangential_restitution,
                        scene.rolling_friction, [g.packed().tolist() for g in scene.geometry],
                        [(list(s.low), list(s.high), s.recycle) for s in scene.sinks])).encode())
+    if len(getattr(scene, "materials", ())) > 0:
+        h.update(np.ascontiguousarray(scene.material, dtype=np.int32).tobytes())
+        h.update(np.ascontiguousarray(scene.pair_values(), dtype=np.float64).tobytes())
     return h.hexdigest()
 
 

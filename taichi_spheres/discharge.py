@@ -124,5 +124,6 @@ def discharge(scene, rows, warm, dtype, rng):
     keep = ~out
     gone.kept = keep
     smaller = dataclasses.replace(scene, x=x[keep], v=v[keep], radius=scene.radius[keep],
-                                  mass=scene.mass[keep], omega=omega[keep])
+                                  mass=scene.mass[keep], omega=omega[keep],
+                                  material=scene.material[keep])
     return smaller, (x[keep], v[keep], omega[keep]), renumber_warm(warm, keep), gone

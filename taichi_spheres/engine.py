@@ -113,7 +113,7 @@ class Engine:
         self.cell_capacity = cell_capacity
         f = key.features
         self.state = SphereState(capacity, f, key.real)
-        self.params = StepParams(key.real)
+        self.params = StepParams(key.real, f.materials)
         t = key.tuning
         self.motion = Motion(self.state, self.params, f, key.serial_light, t)
         periodic = tuple(not w for w in f.wall_axes)

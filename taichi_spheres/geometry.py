@@ -38,7 +38,7 @@ import math
 import numpy as np
 
 __all__ = ["Plane", "Cylinder", "Cone", "Sink", "PACKED_WIDTH", "PLANE", "CONE", "resolved",
-           "check_sinks", "hole_problem", "inside_problem", "with_material"]
+           "check_sinks", "hole_problem", "inside_problem", "with_material", "optional_number"]
 
 PACKED_WIDTH = 14
 PLANE, CONE = 0, 1
@@ -64,15 +64,17 @@ def _unit(owner, key, value) -> np.ndarray:
     return v / size
 
 
-def _optional(owner, key, value, low=0.0, high=math.inf, strict=False):
-    """None, or a float in [low, high] ((low, high] when strict), else ValueError."""
+def optional_number(owner, key, value, low=0.0, high=math.inf, strict=False):
+    """None, or a finite float in [low, high] ((low, high] when strict), else ValueError
+    naming owner.key."""
     if value is None:
         return None
     try:
         out = float(value)
     except (TypeError, ValueError):
         raise ValueError(f"{owner}.{key} must be a number, got {value!r}") from None
-    bad = not (out > low if strict else out >= low) or not out <= high or math.isnan(out)
+    bad = not (out > low if strict else out >= low) or not out <= high or \
+        not math.isfinite(out)
     if bad:
         side = ">" if strict else ">="
         rng = f"{side} {low:g}" + ("" if math.isinf(high) else f" and <= {high:g}")
@@ -82,8 +84,8 @@ def _optional(owner, key, value, low=0.0, high=math.inf, strict=False):
 
 def _material(owner, restitution, friction):
     """(restitution in [0, 1] or None, friction >= 0 or None), checked."""
-    return (_optional(owner, "restitution", restitution, 0.0, 1.0),
-            _optional(owner, "friction", friction))
+    return (optional_number(owner, "restitution", restitution, 0.0, 1.0),
+            optional_number(owner, "friction", friction))
 
 
 def _radial(d, axis):
@@ -107,7 +109,7 @@ class Plane:
         set_ = object.__setattr__
         set_(self, "point", _vector("Plane", "point", self.point))
         set_(self, "normal", _unit("Plane", "normal", self.normal))
-        set_(self, "hole", _optional("Plane", "hole", self.hole, strict=True))
+        set_(self, "hole", optional_number("Plane", "hole", self.hole, strict=True))
         e, mu = _material("Plane", self.restitution, self.friction)
         set_(self, "restitution", e)
         set_(self, "friction", mu)
@@ -151,13 +153,13 @@ class Cone:
         for key in ("radius_at_point", "radius_at_end"):
             if getattr(self, key) is None:
                 raise ValueError(f"{name}.{key} must be a number >= 0")
-            set_(self, key, _optional(name, key, getattr(self, key)))
+            set_(self, key, optional_number(name, key, getattr(self, key)))
         if self.radius_at_point == 0 and self.radius_at_end == 0:
             raise ValueError(f"{name}: radius_at_point and radius_at_end must not both be 0")
         if self.length is not None or name == "Cone":
             if self.length is None:
                 raise ValueError("Cone.length must be a number > 0")
-            set_(self, "length", _optional(name, "length", self.length, strict=True))
+            set_(self, "length", optional_number(name, "length", self.length, strict=True))
             if math.isinf(self.length):
                 raise ValueError(f"{name}.length must be finite")
         if not isinstance(self.inside, (bool, np.bool_)):

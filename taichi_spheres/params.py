@@ -13,6 +13,8 @@ import types
 import numpy as np
 import taichi as ti
 
+from .materials import MAX_MATERIALS
+
 #: static geometry objects a scene may have (planes, cylinders, cones: geometry.py)
 MAX_GEOMETRY = 16
 #: numbers per geometry object (geometry.PACKED_WIDTH: kind, point, axis, r0, r1,
@@ -50,11 +52,19 @@ class StepParams:
     impact); friction coefficients mu, mu_wall, mu_roll and beta_max (the sticking
     bound of the tangential restitution: contacts/friction.py); the geometry table
     geo (MAX_GEOMETRY, GEOMETRY_WIDTH) with n_geo objects (geometry.py's packed
-    rows); sink_lo, sink_hi (MAX_SINKS,) vec3 with n_sinks regions [m]; and the step's counters, one 0-d field per name of COUNTS (i32) and VALUES
-    (real): ``params.pair_collisions[None]``."""
+    rows); sink_lo, sink_hi (MAX_SINKS,) vec3 with n_sinks regions [m]; with
+    ``materials`` (state.Features.materials) the pair tables pair_e, pair_mu,
+    pair_mu_roll (MAX_MATERIALS, MAX_MATERIALS) of materials.pair_table (else the
+    scalars e, mu, mu_roll hold the one set of pair values); and the step's counters,
+    one 0-d field per name of COUNTS (i32) and VALUES (real):
+    ``params.pair_collisions[None]``."""
 
-    def __init__(self, real):
+    def __init__(self, real, materials: bool = False):
         self.real = real
+        self.materials = materials
+        shape = (MAX_MATERIALS, MAX_MATERIALS)
+        self.pair_e, self.pair_mu, self.pair_mu_roll = (
+            (ti.field(real, shape=shape) for _ in range(3)) if materials else (None,) * 3)
         self.rest_speed = ti.field(real, shape=())
         self.h = ti.field(real, shape=())
         self.gravity = ti.Vector.field(3, real, shape=())
@@ -99,16 +109,54 @@ class StepParams:
         self.lo[None] = scene.box_lo.tolist()
         self.hi[None] = scene.box_hi.tolist()
         self.size[None] = (scene.box_hi - scene.box_lo).tolist()
-        self.e[None] = scene.restitution
         self.e_wall[None] = scene.wall_restitution
         self.rest_speed[None] = rest_speed
-        self.mu[None] = float(getattr(scene, "friction", 0.0))
         self.mu_wall[None] = float(getattr(scene, "wall_friction", 0.0))
-        self.mu_roll[None] = float(getattr(scene, "rolling_friction", 0.0))
+        self.bind_materials(scene)
         beta0 = float(getattr(scene, "tangential_restitution", -1.0))
         self.beta_max[None] = 0.0 if beta0 == -1.0 else beta0
         self.bind_geometry(getattr(scene, "geometry", ()))
         self.bind_sinks(getattr(scene, "sinks", ()))
+
+    def bind_materials(self, scene):
+        """Load the pair values: the scalars from the material of sphere 0 (all pairs
+        alike without Features.materials), the tables from scene.pair_values()."""
+        if hasattr(scene, "pair_values"):
+            table = scene.pair_values()
+            m0 = int(scene.material[0])
+        else:
+            table = np.array([[[scene.restitution, 0.0, 0.0]]])
+            m0 = 0
+        self.e[None], self.mu[None], self.mu_roll[None] = (float(c) for c in table[m0, m0])
+        if self.materials:
+            full = np.zeros((MAX_MATERIALS, MAX_MATERIALS, 3))
+            full[:len(table), :len(table)] = table
+            for field, c in zip((self.pair_e, self.pair_mu, self.pair_mu_roll), range(3)):
+                field.from_numpy(full[..., c].astype(self._value_host.dtype))
+
+    @ti.func
+    def restitution_of(self, a, b):
+        """Pair restitution e of materials a, b."""
+        out = self.e[None]
+        if ti.static(self.materials):
+            out = self.pair_e[a, b]
+        return out
+
+    @ti.func
+    def friction_of(self, a, b):
+        """Pair friction coefficient mu of materials a, b."""
+        out = self.mu[None]
+        if ti.static(self.materials):
+            out = self.pair_mu[a, b]
+        return out
+
+    @ti.func
+    def rolling_of(self, a, b):
+        """Pair rolling friction mu_r of materials a, b (a, a on a wall)."""
+        out = self.mu_roll[None]
+        if ti.static(self.materials):
+            out = self.pair_mu_roll[a, b]
+        return out
 
     def bind_sinks(self, sinks):
         """Load the scene's sink regions (low, high corners [m])."""

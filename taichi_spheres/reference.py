@@ -97,6 +97,12 @@ class EventDrivenReference:
         self._r = np.asarray(scene.radius, dtype=np.float64).copy()
         self._m = np.asarray(scene.mass, dtype=np.float64).copy()
         self._e = float(scene.restitution)
+        if hasattr(scene, "pair_values"):    # per-material pair restitution (materials.py)
+            self._e_pair = scene.pair_values()[..., 0]
+            self._material = np.asarray(scene.material)
+        else:
+            self._e_pair = np.full((1, 1), self._e)
+            self._material = np.zeros(n, dtype=np.int32)
         self._ew = float(scene.wall_restitution)
         gnorm = float(np.linalg.norm(self._g))
         if rest_speed is None:
@@ -299,7 +305,8 @@ class EventDrivenReference:
         un = float(u @ n_hat)
         mi, mj = self._m[i], self._m[j]
         if un < 0.0:
-            J = (1.0 + self._e) * mi * mj / (mi + mj) * un
+            e = float(self._e_pair[self._material[i], self._material[j]])
+            J = (1.0 + e) * mi * mj / (mi + mj) * un
             self._v[i] -= J * n_hat / mi
             self._v[j] += J * n_hat / mj
             self.virial += -J * float(d @ n_hat)

@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from . import geometry as geo
+from . import materials as mat
 
 __all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE", "RESTITUTION_MODELS", "MIN_STEP_ULPS",
            "OVERFLOW_HEADROOM", "largest_speed", "smallest_radius", "fall_speed",
@@ -64,6 +65,11 @@ class Scene:
         omega: (N, 3) angular velocities [rad/s] (zeros unless given)
         geometry: tuple of ts.Plane / ts.Cylinder / ts.Cone (geometry.py), their
             restitution and friction resolved; sinks: tuple of ts.Sink
+        material: (N,) int32 index of each sphere's material; materials: tuple of
+            ts.Material as given (None coefficients: the scene's values; empty: one
+            material of the scene's values); material_pairs: {(a, b): ts.Material}
+            overrides, a <= b (materials.py: pair values are the smaller of the two
+            materials'; :meth:`pair_values` gives the table)
     """
 
     x: np.ndarray
@@ -88,17 +94,52 @@ class Scene:
     omega: np.ndarray = None
     geometry: tuple = ()
     sinks: tuple = ()
+    material: np.ndarray = None
+    materials: tuple = ()
+    material_pairs: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):
         if self.omega is None:
             object.__setattr__(self, "omega", np.zeros_like(self.v))
+        if self.material is None:
+            object.__setattr__(self, "material", np.zeros(self.n, dtype=np.int32))
+        defaults = dict(restitution=self.restitution, friction=self.friction,
+                        rolling_friction=self.rolling_friction)
+        table = mat.pair_table(mat.resolved(self.materials, defaults), self.material_pairs)
+        table.setflags(write=False)
+        object.__setattr__(self, "_pair_values", table)
+
+    def pair_values(self) -> np.ndarray:
+        """(M, M, 3) restitution, friction and rolling friction of each pair of the M
+        materials (materials.pair_table; read-only)."""
+        return self._pair_values
+
+    @property
+    def varied_materials(self) -> bool:
+        """True when pairs of spheres in this scene have different pair values (the
+        engine then looks them up per pair)."""
+        used = np.unique(self.material)
+        table = self.pair_values()[np.ix_(used, used)]
+        return bool(np.any(table != table[0, 0]))
+
+    @property
+    def elastic_pairs(self) -> bool:
+        """True when every pair of materials the spheres use has restitution 1."""
+        used = np.unique(self.material)
+        return bool(np.all(self.pair_values()[np.ix_(used, used)][..., 0] == 1.0))
 
     @property
     def frictional(self) -> bool:
-        """True when a friction coefficient (pairs, walls, geometry, rolling) is not 0:
-        the engine then simulates spin."""
+        """True when a friction coefficient (pairs, walls, geometry, rolling, materials)
+        is not 0: the engine then simulates spin."""
+        table = self.pair_values()[..., 1:]
         return bool(self.friction or self.wall_friction or self.rolling_friction
-                    or any(g.friction for g in self.geometry))
+                    or any(g.friction for g in self.geometry) or np.any(table > 0))
+
+    @property
+    def rolling(self) -> bool:
+        """True when a rolling friction (the scene's or a material's) is not 0."""
+        return bool(self.rolling_friction or np.any(self.pair_values()[..., 2] > 0))
 
     @property
     def n(self) -> int:
@@ -115,7 +156,8 @@ class Scene:
                     gravity=(0.0, 0.0, -9.81), restitution=1.0, wall_restitution=1.0,
                     name="scene", restitution_model="normal", rest_speed=None,
                     friction=0.0, wall_friction=None, tangential_restitution=-1.0,
-                    rolling_friction=0.0, omega=None, geometry=(), sinks=()) -> "Scene":
+                    rolling_friction=0.0, omega=None, geometry=(), sinks=(),
+                    material=None, materials=(), material_pairs=None) -> "Scene":
         """Build and validate a scene from arrays.
 
         x, v: (N, 3) positions [m] and velocities [m/s]. radius: scalar or (N,) [m].
@@ -127,6 +169,10 @@ class Scene:
         tangential_restitution in [-1, 1], rolling_friction >= 0; omega: (N, 3) [rad/s]
         or None (zero spin); geometry: ts.Plane / ts.Cylinder / ts.Cone objects (their
         restitution and friction None: the wall values); sinks: ts.Sink regions.
+        materials: ts.Material objects (their None coefficients: the scene's values),
+        material: each sphere's index into them ((N,) ints or one int; None: 0),
+        material_pairs: {(a, b): ts.Material} pair values instead of the smaller of the
+        two materials' (materials.py).
         Raises ValueError naming the argument or sphere index at fault.
         """
         x, v, radius = _spheres(x, v, radius)
@@ -149,10 +195,11 @@ class Scene:
         spin["omega"] = _omega(omega, x.shape[0], radius)
         shapes = _geometry(geometry, sinks, wall_restitution, spin["wall_friction"], x, radius,
                            lo, hi)
+        kinds = _materials(material, materials, material_pairs, x.shape[0])
         scene = cls(x=x, v=v, radius=radius, mass=mass, box_lo=lo, box_hi=hi,
                     periodic=periodic, gravity=gravity, restitution=restitution,
                     wall_restitution=wall_restitution, restitution_model=restitution_model,
-                    rest_speed=rest_speed, name=str(name), **spin, **shapes)
+                    rest_speed=rest_speed, name=str(name), **spin, **shapes, **kinds)
         if scene.frictional and restitution_model == "smid":
             raise ValueError("restitution_model 'smid' has no tangential model: use "
                              "'normal' with friction")
@@ -168,7 +215,8 @@ class Scene:
                     friction=self.friction, wall_friction=self.wall_friction,
                     tangential_restitution=self.tangential_restitution,
                     rolling_friction=self.rolling_friction, omega=self.omega,
-                    geometry=self.geometry, sinks=self.sinks)
+                    geometry=self.geometry, sinks=self.sinks, material=self.material,
+                    materials=self.materials, material_pairs=self.material_pairs)
         if "density" in changes:
             args.pop("mass")
         args.update(changes)
@@ -266,6 +314,15 @@ def _friction(friction, wall_friction, beta0, rolling) -> dict:
                 _coefficient("wall_friction", wall_friction),
                 tangential_restitution=_coefficient("tangential_restitution", beta0, -1.0, 1.0),
                 rolling_friction=_coefficient("rolling_friction", rolling))
+
+
+def _materials(material, materials, pairs, n) -> dict:
+    """Checked per-sphere material indices, materials (as given: Scene resolves and
+    checks them) and pair overrides."""
+    materials = tuple(materials or ())
+    count = max(len(materials), 1)
+    return dict(material=mat.material_indices(material, n, count), materials=materials,
+                material_pairs=mat.resolved_pairs(pairs, count))
 
 
 def _omega(omega, n, radius) -> np.ndarray:

@@ -29,6 +29,9 @@ Units are SI, z is up. docs/scenes.md lists every key and its default.
     the spheres of a table); [[pour]] and [[random]] place spheres clear of geometry
     [[plane]], [[cylinder]], [[cone]], [[sink]]: static geometry and sinks
                  (scenegeometry.py; keys as ts.Plane, ts.Cylinder, ts.Cone, ts.Sink)
+    [[material]] name, restitution, friction, rolling_friction; [[material_pair]]
+                 materials (two names) and the pair's values; the sphere tables'
+                 material key names one (scenematerials.py; default: [physics])
 """
 from __future__ import annotations
 
@@ -47,12 +50,14 @@ import numpy as np
 
 from .scene import DEFAULT_DENSITY, RESTITUTION_MODELS, Scene
 from .scenegeometry import geometry_tables, table_items
+from .scenematerials import DEFAULT_MATERIAL, material_index, material_tables
 
 __all__ = ["load_scene", "scene_from_dict", "SceneFileError"]
 
 _TOP = {"name": str, "box": dict, "physics": dict, "run": dict, "render": dict, "output": dict,
         "initial": dict, "spheres": list, "lattice": list, "random": list, "pour": list,
-        "plane": list, "cylinder": list, "cone": list, "sink": list}
+        "plane": list, "cylinder": list, "cone": list, "sink": list, "material": list,
+        "material_pair": list}
 _RENDER = {"width": int, "height": int, "camera_position": "vec3", "camera_lookat": "vec3",
            "fov": float, "colours": str, "background": "vec3"}
 _BOX = {"lo": "vec3", "hi": "vec3", "periodic": "bool3", "wall_restitution": float}
@@ -65,16 +70,16 @@ _OUTPUT = {"video": str, "snapshots": bool, "checkpoint_every": int, "trajectory
            "trajectory_every": int}
 _INITIAL = {"gsd": str, "frame": int}
 _SPHERE = {"colour": "vec3", "x": "vec3", "v": "vec3", "radius": float, "mass": float,
-           "density": float, "omega": "vec3"}
-_LATTICE = {"colour": "vec3", "v_spread": float, "lo": "vec3", "hi": "vec3", "spacing": float, "radius": float,
-            "mass": float,
-            "density": float, "v": "vec3", "speed": float, "seed": int, "omega": "vec3"}
+           "density": float, "omega": "vec3", "material": str}
+_LATTICE = {"colour": "vec3", "v_spread": float, "lo": "vec3", "hi": "vec3",
+            "spacing": float, "radius": float, "mass": float, "density": float, "v": "vec3",
+            "speed": float, "seed": int, "omega": "vec3", "material": str}
 _POUR = {"colour": "vec3", "count": int, "lo": "vec3", "hi": "vec3", "radius": float,
          "mass": float, "density": float, "v": "vec3", "v_spread": float, "seed": int,
-         "omega": "vec3"}
-_RANDOM = {"colour": "vec3", "radius_spread": float, "v_spread": float, "count": int, "lo": "vec3", "hi": "vec3", "radius": float,
-           "mass": float,
-           "density": float, "v": "vec3", "speed": float, "seed": int, "omega": "vec3"}
+         "omega": "vec3", "material": str}
+_RANDOM = {"colour": "vec3", "radius_spread": float, "v_spread": float, "count": int,
+           "lo": "vec3", "hi": "vec3", "radius": float, "mass": float, "density": float,
+           "v": "vec3", "speed": float, "seed": int, "omega": "vec3", "material": str}
 
 
 class SceneFileError(ValueError):
@@ -113,18 +118,22 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
     tables = _settings_tables(data, problems)
     shapes = geometry_tables(data, _check_table, problems)
     groups = _sphere_groups(data, problems)
+    kinds = _group_materials(data, groups, problems)
     box, physics, initial = tables["box"], tables["physics"], tables["initial"]
     _check_scene_wide(box, physics, initial, groups, problems)
+    if "gsd" in initial and kinds["given"]:
+        problems.append("material: the spheres of [initial] gsd take the [physics] values; "
+                        "[[material]] and [[material_pair]] apply to sphere tables")
     meta = {"run": tables["run"], "physics": physics, "render": tables["render"],
             "output": tables["output"], "source": source}
     if "gsd" in initial and not problems:
         return _scene_from_initial(initial, box, physics, dict(data, _shapes=shapes), meta,
                                    source)
+    data = dict(data, _shapes=shapes, _materials=kinds)
     arrays = _generated_arrays(groups, box, problems, shapes) if not problems else None
     if problems:
         raise SceneFileError(source, problems)
-    return _scene_from_groups(groups, arrays, box, physics, dict(data, _shapes=shapes), meta,
-                              source)
+    return _scene_from_groups(groups, arrays, box, physics, data, meta, source)
 
 
 def _settings_tables(data, problems) -> dict:
@@ -152,6 +161,20 @@ def _sphere_groups(data, problems) -> list:
             _check_group(key, where, item, schema, problems)
             groups.append((key, where, item))
     return groups
+
+
+def _group_materials(data, groups, problems) -> dict:
+    """The file's materials (scenematerials.material_tables) with "given" (the file has
+    material tables) and "groups": each sphere table's material index."""
+    kinds = material_tables(data, _check_table, problems)
+    kinds["given"] = len(kinds["materials"]) > 1 or bool(kinds["material_pairs"])
+    kinds["groups"] = []
+    for _, where, item in groups:
+        name = item.get("material", DEFAULT_MATERIAL)
+        index = material_index(name, kinds["names"], f"{where}.material", problems) \
+            if isinstance(name, str) else 0
+        kinds["groups"].append(0 if index is None else index)
+    return kinds
 
 
 def _check_scene_wide(box, physics, initial, groups, problems):
@@ -194,7 +217,7 @@ def _scene_from_groups(groups, arrays, box, physics, data, meta, source) -> Scen
             np.concatenate(arrays["radius"]), mass=np.concatenate(arrays["mass"]),
             omega=np.concatenate(arrays["omega"]),
             box=(lo, hi), periodic=box.get("periodic", [False, False, False]),
-            **_physics_args(box, physics, data))
+            **_physics_args(box, physics, data), **_material_args(data, arrays))
     except ValueError as exc:
         raise SceneFileError(source, [str(exc) + _origins(str(exc), groups, arrays)]) from None
     colours = np.array([item.get("colour", [-1.0, -1.0, -1.0]) for _, _, item in groups],
@@ -218,6 +241,17 @@ def _physics_args(box, physics, data) -> dict:
                 tangential_restitution=physics.get("tangential_restitution", -1.0),
                 rolling_friction=physics.get("rolling_friction", 0.0),
                 geometry=shapes.get("geometry", ()), sinks=shapes.get("sinks", ()))
+
+
+def _material_args(data, arrays) -> dict:
+    """material, materials and material_pairs of Scene.from_arrays (none when the file
+    has no material tables)."""
+    kinds = data["_materials"]
+    if not kinds["given"]:
+        return {}
+    index = [np.full(len(x), k, dtype=np.int32) for x, k in zip(arrays["x"], kinds["groups"])]
+    return dict(material=np.concatenate(index), materials=kinds["materials"],
+                material_pairs=kinds["material_pairs"])
 
 
 def _check_output(output, problems):

@@ -57,7 +57,8 @@ def rest_speed_for(scene: Scene, step_fraction: float = DEFAULT_STEP_FRACTION,
     sqrt(2 D / g)); the scene's ``rest_speed`` if larger; 0 (no contact solver)
     without either, and always for elastic pairs without friction (e = 1 stays
     exactly elastic)."""
-    if scene.restitution == 1.0 and not getattr(scene, "frictional", False):
+    elastic = getattr(scene, "elastic_pairs", scene.restitution == 1.0)
+    if elastic and not getattr(scene, "frictional", False):
         return 0.0
     g = float(np.linalg.norm(scene.gravity))
     speed = tuning.physics.impact_factor * \
@@ -204,6 +205,7 @@ class Simulation:
         self._sink_rng = np.random.default_rng(12345)   # free spots of recycled spheres
         #: scene indices of the spheres still simulated (sinks take some out)
         self.sphere_ids = np.arange(scene.n)
+        self._original_material = scene.material.copy()
         # how a step runs (stepping.py): kernel by kernel, or fused for small CPU systems
         self._stepper = stepping.Stepper(self, fused=self.schedule.fused)
         self.initial_energy = observe.total_energy(scene, scene.gravity)
@@ -388,13 +390,16 @@ class Simulation:
             self._discharge()
 
     def _keep_spheres(self, ckpt: dict) -> None:
-        """Continue with the spheres of a checkpoint taken after a discharge."""
+        """Continue with the spheres of a checkpoint taken after a discharge (their
+        materials those of the original scene's spheres of the same ids)."""
+        ids = np.asarray(ckpt.get("sphere_ids", np.arange(len(ckpt["mass"]))))
+        material = self._original_material[ids]
         self.scene = dataclasses.replace(
             self.scene, x=np.asarray(ckpt["x"], dtype=np.float64),
             v=np.asarray(ckpt["v"], dtype=np.float64),
             radius=np.asarray(ckpt["radius"], dtype=np.float64),
             mass=np.asarray(ckpt["mass"], dtype=np.float64),
-            omega=np.asarray(ckpt["omega"], dtype=np.float64))
+            omega=np.asarray(ckpt["omega"], dtype=np.float64), material=material)
         self._parked = (self.scene.x, self.scene.v, self.scene.omega, None)
         if "sphere_ids" in ckpt:
             self.sphere_ids = np.asarray(ckpt["sphere_ids"])

@@ -33,12 +33,13 @@ class Features:
     rolling: bool = False    # rolling friction is non-zero (only with friction)
     geometry: bool = False   # static geometry besides the box (planes, cylinders, cones)
     sinks: bool = False      # regions that discharge spheres
+    materials: bool = False  # pair values differ between materials: per-sphere index, table
 
     @classmethod
     def from_scene(cls, scene: Scene, rest_speed: float = 0.0) -> "Features":
         """rest_speed: the scene's floor of the impact speed [m/s]. The contact solver
         runs for inelastic pairs under gravity, or with a rest speed."""
-        elastic = scene.restitution == 1.0
+        elastic = bool(getattr(scene, "elastic_pairs", scene.restitution == 1.0))
         friction = bool(getattr(scene, "frictional", False))
         return cls(gravity_axes=tuple(bool(g != 0.0) for g in scene.gravity),
                    wall_axes=tuple(not p for p in scene.periodic),
@@ -50,9 +51,10 @@ class Features:
                    contacts=(not elastic or friction) and (any(g != 0.0 for g in scene.gravity)
                                                            or rest_speed > 0),
                    friction=friction,
-                   rolling=friction and float(getattr(scene, "rolling_friction", 0.0)) > 0,
+                   rolling=friction and bool(getattr(scene, "rolling", False)),
                    geometry=len(getattr(scene, "geometry", ())) > 0,
-                   sinks=len(getattr(scene, "sinks", ())) > 0)
+                   sinks=len(getattr(scene, "sinks", ())) > 0,
+                   materials=bool(getattr(scene, "varied_materials", False)))
 
     @property
     def gravity(self) -> bool:
@@ -90,6 +92,8 @@ class Features:
             "geometry: " + ("planes, cylinders, cones" if self.geometry
                             else "box only (compiled out)"),
             "sinks: " + ("on" if self.sinks else "none (compiled out)"),
+            "materials: " + ("per sphere (pair table)" if self.materials
+                             else "one set of pair values (compiled out)"),
         ]
 
 
@@ -130,6 +134,7 @@ class SphereState:
         loaded: (N,) i32, only with features.contacts — 1 when a contact row of the
             sphere carried an impulse in the last step (contacts/solver.py)
         omega: (N,) vec3 real, only with features.friction — angular velocity [rad/s]
+        material: (N,) i32, only with features.materials — material index (materials.py)
         n_spheres: () i32 — spheres of the bound scene
         r0, m0: () real — the radius [m] and mass [kg] of every sphere when equal
     """
@@ -147,6 +152,7 @@ class SphereState:
         self.hits = ti.field(ti.i32, shape=capacity)
         self.loaded = ti.field(ti.i32, shape=capacity) if features.contacts else None
         self.omega = ti.Vector.field(3, real, shape=capacity) if features.friction else None
+        self.material = ti.field(ti.i32, shape=capacity) if features.materials else None
         self.n_spheres = ti.field(ti.i32, shape=())
         self.r0 = ti.field(real, shape=())
         self.m0 = ti.field(real, shape=())
@@ -195,6 +201,10 @@ class SphereState:
         self.r0[None] = float(scene.radius[0])
         self.m0[None] = float(scene.mass[0])
         self.load(x, v, scene.radius, scene.mass, omega)
+        if self.features.materials:
+            index = np.zeros(self.capacity, dtype=np.int32)
+            index[:scene.n] = scene.material
+            self.material.from_numpy(index)
 
     def load(self, x, v, radius, mass, omega=None):
         """Positions [m], velocities [m/s], radii [m], masses [kg] and spins [rad/s] (None:
@@ -238,6 +248,14 @@ class SphereState:
         if ti.static(not self.features.equal_radii):
             r = self.radius[i]
         return r
+
+    @ti.func
+    def material_of(self, i):
+        """Material index of sphere i (0 when the scene's pair values are one set)."""
+        out = 0
+        if ti.static(self.features.materials):
+            out = self.material[i]
+        return out
 
     @ti.func
     def inv_mass_of(self, i):

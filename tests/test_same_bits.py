@@ -31,8 +31,10 @@ with open(os.path.join(os.path.dirname(__file__), "same_bits.json")) as _f:
 
 def _digest(case, precision, arch="cpu", **kw):
     """(digest, Simulation) of the reference scene of ``case`` after its run."""
-    sim = ts.Simulation(same_bits_scene(STORED[case]["n"], STORED[case].get("frictional", False)),
-                        arch=arch, precision=precision, **kw)
+    stored = STORED[case]
+    scene = same_bits_scene(stored["n"], stored.get("frictional", False),
+                            stored.get("materials", False))
+    sim = ts.Simulation(scene, arch=arch, precision=precision, **kw)
     sim.advance(STORED[case]["duration"])
     return ts.observe.state_digest(sim.state(), precision), sim
 
@@ -43,7 +45,7 @@ def _cpu_only(arch):
                     "their runs with each other)")
 
 
-@pytest.mark.parametrize("case", ["small", "large", "frictional"])
+@pytest.mark.parametrize("case", ["small", "large", "frictional", "materials"])
 def test_reference_scenes_give_the_stored_digests(arch, precision, case):
     _cpu_only(arch)
     digest, sim = _digest(case, precision)
@@ -51,7 +53,7 @@ def test_reference_scenes_give_the_stored_digests(arch, precision, case):
     assert digest == STORED[case]["digests"][precision]
 
 
-@pytest.mark.parametrize("case", ["small", "frictional"])
+@pytest.mark.parametrize("case", ["small", "frictional", "materials"])
 def test_fused_step_gives_the_stored_digest(arch, case):
     _cpu_only(arch)
     digest, sim = _digest(case, "f64", fused=True)

@@ -535,8 +535,8 @@ def test_good_scene_file(tmp_path):
 def test_unknown_top_level_key(tmp_path):
     problems, msg = load_problems(tmp_path, 'bogus = 1\n' + GOOD)
     assert problems == ["unknown key 'bogus' (valid: box, cone, cylinder, initial, lattice, "
-                        "name, output, physics, plane, pour, random, render, run, sink, "
-                        "spheres)"]
+                        "material, material_pair, name, output, physics, plane, pour, "
+                        "random, render, run, sink, spheres)"]
 
 
 def test_misspelt_top_level_key_gets_suggestion(tmp_path):
@@ -566,8 +566,8 @@ def test_unknown_nested_key_gets_nearest_name(tmp_path, old, new, key, hint):
 
 def test_unknown_key_without_near_match_lists_valid_keys(tmp_path):
     problems, _ = load_problems(tmp_path, GOOD.replace("mass = 2.0", "weight = 2.0"))
-    assert problems == ["unknown key 'spheres[0].weight' (valid: colour, density, mass, omega, "
-                        "radius, v, x)"]
+    assert problems == ["unknown key 'spheres[0].weight' (valid: colour, density, mass, "
+                        "material, omega, radius, v, x)"]
 
 
 def test_all_problems_reported_at_once(tmp_path):

@@ -7,7 +7,8 @@ colour launches. This script runs ``builders.same_bits_scene(n)`` for each case 
 ``tests/same_bits.json`` ("small": 400 spheres for 0.8 s, ~1,000 steps, piling up on
 the floor; "large": 3,000 spheres, where detection keeps near lists and sweeps can
 launch per colour; "frictional": the small case with friction, spin and a post of
-static geometry) and prints the digest of the final positions and velocities
+static geometry; "materials": the frictional case with every other sphere of a
+second material) and prints the digest of the final positions and velocities
 (``observe.state_digest``) with the collision counts, for each path asked for, and
 whether it matches the digest stored there (``tests/test_same_bits.py`` holds the
 engine to it).
@@ -31,6 +32,7 @@ import sys
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 STORED = os.path.join(ROOT, "tests", "same_bits.json")
 PATHS = ("default", "fused", "parallel")
+CASES = ["small", "large", "frictional", "materials"]
 
 
 def load_stored() -> dict:
@@ -51,7 +53,8 @@ def run_path(case: dict, precision: str, path: str, threads=None, compile=None) 
     runtime.ensure("cpu", precision, threads=threads, compile=compile)
     tuning = DEFAULT.with_(few_pairs=-1, serial_resolve_pairs=-1) if path == "parallel" \
         else DEFAULT
-    sim = ts.Simulation(same_bits_scene(case["n"], case.get("frictional", False)),
+    sim = ts.Simulation(same_bits_scene(case["n"], case.get("frictional", False),
+                                        case.get("materials", False)),
                         precision=precision, threads=threads,
                         fused=path == "fused", tuning=tuning)
     sim.advance(case["duration"])
@@ -63,8 +66,7 @@ def run_path(case: dict, precision: str, path: str, threads=None, compile=None) 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--cases", nargs="+", default=["small", "large", "frictional"],
-                   choices=["small", "large", "frictional"])
+    p.add_argument("--cases", nargs="+", default=CASES, choices=CASES)
     p.add_argument("--precisions", nargs="+", default=["f64", "f32"], choices=["f64", "f32"])
     p.add_argument("--paths", nargs="+", default=["default"], choices=PATHS)
     p.add_argument("--compile", default=None, choices=["fast", "optimized"])

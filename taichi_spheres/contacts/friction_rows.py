@@ -36,11 +36,14 @@ class FrictionRows:
 
     @ti.func
     def row_friction(self, s):
-        """Friction coefficient of row s: the pair value, the wall value, or the
-        geometry object's (params.geo column 13)."""
+        """Friction coefficient of row s: the pair value (of the two spheres'
+        materials), the wall value, or the geometry object's (params.geo column 13)."""
         b = self.row_b[s]
-        out = self.params.mu[None]
-        if b < 0:
+        out = ti.cast(0, self.real)
+        if b >= 0:
+            out = self.params.friction_of(self.state.material_of(self.row_a[s]),
+                                          self.state.material_of(b))
+        else:
             wall = -1 - b
             out = self.params.mu_wall[None]
             if wall >= GEOMETRY_ROWS:
@@ -49,14 +52,18 @@ class FrictionRows:
 
     @ti.func
     def rolling_limit(self, s):
-        """mu_r r_eff lambda_n of row s [N m s]."""
+        """mu_r r_eff lambda_n of row s [N m s] (on a wall: sphere a's material's
+        mu_r)."""
         a = self.row_a[s]
         b = self.row_b[s]
         r = self.state.rad(a)
+        ma = self.state.material_of(a)
+        mb = ma
         if b >= 0:
             rb = self.state.rad(b)
             r = r * rb / (r + rb)
-        return self.params.mu_roll[None] * r * self.lam[s]
+            mb = self.state.material_of(b)
+        return self.params.rolling_of(ma, mb) * r * self.lam[s]
 
     @ti.func
     def clamped(self, vec, limit):

@@ -130,7 +130,8 @@ class PairRule:
         if un < 0:
             e = ti.cast(1, self.real)
             if ti.static(not self.f.elastic):
-                e = self.params.e[None]
+                e = self.params.restitution_of(self.state.material_of(i),
+                                               self.state.material_of(j))
             collapse = self.collapsing(i, j, e)
             dvi, dvj = self.velocity_change(i, j, n, un, u, e, collapse)
             if ti.static(self.f.friction):
@@ -152,8 +153,8 @@ class PairRule:
         rj = self.state.rad(j)
         ut = tangential_part(contact_velocity(u, u * 0, self.state.omega[i], self.state.omega[j],
                                               ri, rj, n), n)
-        p = walton_impulse(ut, meff * jn_speed, meff, self.params.mu[None],
-                           self.params.beta_max[None])
+        mu = self.params.friction_of(self.state.material_of(i), self.state.material_of(j))
+        p = walton_impulse(ut, meff * jn_speed, meff, mu, self.params.beta_max[None])
         self.state.omega[i] += spin_change(ri, self.state.inv_inertia_of(i), n, p)
         self.state.omega[j] += spin_change(rj, self.state.inv_inertia_of(j), n, p)
         after = ut + ti.cast(3.5, self.real) / meff * p
