@@ -31,6 +31,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 sys.path.insert(0, os.path.dirname(__file__))
 
 import taichi_spheres as ts  # noqa: E402
+from taichi_spheres.config import DEFAULT  # noqa: E402
 from taichi_spheres.geometry import with_material  # noqa: E402
 from machine import cpu_name, write_section  # noqa: E402  (tools/machine.py)
 
@@ -60,6 +61,8 @@ def repose_angle(x, radius, floor=0.0, below=math.inf, centre=None, within=math.
         centre = x[x[:, 2] < below, :2].mean(axis=0)
     rho = np.hypot(x[:, 0] - centre[0], x[:, 1] - centre[1])
     on_floor = (x[:, 2] < below) & (x[:, 2] > floor) & (rho < within)
+    if not on_floor.any():
+        return math.nan, 0.0, 0
     rho, height = surface_profile(x[on_floor], radius[on_floor], centre, 2 * radius.max())
     height = height - floor
     top = height.max()
@@ -70,13 +73,17 @@ def repose_angle(x, radius, floor=0.0, below=math.inf, centre=None, within=math.
     return float(math.degrees(math.atan(-slope))), float(top), int(use.sum())
 
 
-def run_heap(scene, mu, mu_r, duration, rest, threads, base) -> dict:
+def run_heap(scene, mu, mu_r, duration, rest, threads, base, options=None) -> dict:
     """Simulate the heap scene with friction mu and rolling friction mu_r; returns the
-    angle, heap height, time, wall seconds and the largest overlap."""
+    angle, heap height, time, wall seconds and the largest overlap. options:
+    step_fraction and Rules fields (contact_iterations, ...) to change."""
     shapes = [with_material(g, g.restitution, mu) for g in scene.geometry]
     scene = scene.replace(friction=mu, wall_friction=None, rolling_friction=mu_r,
                           geometry=shapes)
-    sim = ts.Simulation(scene, threads=threads)
+    options = dict(options or {})
+    step_fraction = options.pop("step_fraction", None)
+    extra = {} if step_fraction is None else dict(step_fraction=step_fraction)
+    sim = ts.Simulation(scene, threads=threads, tuning=DEFAULT.with_(**options), **extra)
     t0 = time.perf_counter()
     while sim.time < duration - 1e-12:
         sim.advance(0.1)
@@ -88,7 +95,8 @@ def run_heap(scene, mu, mu_r, duration, rest, threads, base) -> dict:
     st = sim.state()
     angle, height, samples = repose_angle(st.x, st.radius, **base)
     return dict(mu=mu, mu_r=mu_r, angle=angle, height=height, samples=samples,
-                time=sim.time, wall_seconds=seconds, max_overlap=sim.stats["max_overlap"],
+                options=options, time=sim.time,
+                sweeps=sim.stats["contact_iterations"] / max(sim.stats["contact_steps"], 1), wall_seconds=seconds, max_overlap=sim.stats["max_overlap"],
                 ke_per_sphere=float(ts.observe.kinetic_energy(st) / st.x.shape[0]))
 
 
@@ -124,6 +132,10 @@ def main(argv=None):
                    metavar=("Z", "X", "Y", "RADIUS"), help="the heap's base: its height "
                    "[m], centre (x, y) [m] and radius [m] (scenes/heap.toml's platform)")
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--step-fraction", type=float, default=None,
+                   help="largest move per step / smallest radius (default: the engine's)")
+    p.add_argument("--iterations", type=int, default=None,
+                   help="contact solver velocity sweeps per step at most (Rules)")
     p.add_argument("--write", action="store_true")
     p.add_argument("--no-write", dest="write", action="store_false")
     a = p.parse_args(argv)
@@ -132,7 +144,10 @@ def main(argv=None):
     for mu in a.mu:
         for mu_r in a.mu_r:
             base = dict(floor=a.base[0], below=a.below, centre=a.base[1:3], within=a.base[3])
-            rows.append(run_heap(scene, mu, mu_r, a.duration, a.rest, a.threads, base))
+            options = {k: v for k, v in (("step_fraction", a.step_fraction),
+                                         ("contact_iterations", a.iterations)) if v}
+            rows.append(run_heap(scene, mu, mu_r, a.duration, a.rest, a.threads, base,
+                                 options))
             print(rows[-1], flush=True)
     text = report(rows, [x for x in argv if x != "--write"], a.threads,
                   os.path.relpath(a.scene, os.path.join(os.path.dirname(__file__), "..")))

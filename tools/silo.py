@@ -77,8 +77,9 @@ def silo_scene(x, v, omega, a, hole, radius=None):
 
 
 def settled_fill(a, height, seed):
-    """(x, v, omega, rho_b, seconds, x_fill): the fill settled with the orifice closed,
-    and the lattice it started from."""
+    """(x, v, omega, rho_b, seconds, x_fill, top): the fill settled with the orifice
+    closed, the lattice it started from, and the settled fill's height above the floor
+    [m] (the mean height of its top 5 % of spheres)."""
     c = a.silo_radius + 0.005
     x = fill_positions(a.silo_radius, a.radius, height, 0.05, np.array([c, c]), seed)
     sim = ts.Simulation(silo_scene(x, np.zeros_like(x), None, a, None), threads=a.threads)
@@ -87,7 +88,7 @@ def settled_fill(a, height, seed):
     st = sim.state()
     top = np.sort(st.x[:, 2])[-max(1, int(0.05 * len(x))):].mean() - 0.05
     rho_b = float(st.mass.sum() / (math.pi * a.silo_radius ** 2 * top))
-    return st.x, st.v, st.omega, rho_b, time.perf_counter() - t0, x
+    return st.x, st.v, st.omega, rho_b, time.perf_counter() - t0, x, top
 
 
 def discharge(a, settled, hole):
@@ -148,6 +149,8 @@ def parse(argv=None):
     p.add_argument("--write", action="store_true", help="write docs/granular.md's section")
     p.add_argument("--no-write", dest="write", action="store_false")
     p.add_argument("--json", help="also write the results to this JSON file")
+    p.add_argument("--section", default="silo", help="the section of docs/granular.md "
+                   "--write replaces ('silo-fill': the fill-height run)")
     return p.parse_args(argv)
 
 
@@ -156,7 +159,8 @@ def run(a) -> dict:
     d = 2 * a.radius
     out = dict(settings=vars(a).copy(), orifices=[], fills=[])
     settled = settled_fill(a, a.fill, seed=1)
-    out.update(n=len(settled[0]), rho_b=settled[3], settle_seconds=settled[4])
+    out.update(n=len(settled[0]), rho_b=settled[3], settle_seconds=settled[4],
+               settled_height=settled[6])
     for ratio in a.orifices:
         times, mass, seconds, sim = discharge(a, settled, ratio * d / 2)
         total = float(settled[0].shape[0] * 2500.0 * 4 / 3 * math.pi * a.radius ** 3)
@@ -174,8 +178,47 @@ def run(a) -> dict:
         times, mass, seconds, sim = discharge(a, other, a.orifices[0] * d / 2)
         total = float(other[0].shape[0] * 2500.0 * 4 / 3 * math.pi * a.radius ** 3)
         w, used = steady_rate(times, mass, total, a.transient)
-        out["fills"].append(dict(fill=height, n=len(other[0]), rate=w, samples=used))
+        out["fills"].append(dict(fill=height, n=len(other[0]), rate=w, samples=used,
+                                 settled_height=other[6]))
     return out
+
+
+def plot_beverloo(out, path) -> bool:
+    """W^(2/5) against D / d with the Beverloo line of the fit, as a PNG at ``path``;
+    False when matplotlib is missing or there is no fit."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return False
+    if "C" not in out:
+        return False
+    a, d = out["settings"], 2 * out["settings"]["radius"]
+    ratio = np.array([o["D_over_d"] for o in out["orifices"]])
+    rate = np.array([o["rate"] for o in out["orifices"]])
+    line = np.linspace(out["k"], ratio.max() * 1.05, 50)
+    fit = out["C"] * out["rho_b"] * math.sqrt(G) * (np.maximum(line - out["k"], 0) * d) ** 2.5
+    fig, ax = plt.subplots(figsize=(5.5, 4.0), dpi=100)
+    ax.plot(ratio, rate ** 0.4, "o", label="tools/silo.py")
+    ax.plot(line, fit ** 0.4, "-", label=f"Beverloo, C = {out['C']:.3f}, k = {out['k']:.2f}")
+    ax.set_xlabel("orifice diameter D / d")
+    ax.set_ylabel("discharge rate W^(2/5) [(kg/s)^(2/5)]")
+    ax.set_title(f"Silo radius {1e3 * a['silo_radius']:g} mm, d = {2e3 * a['radius']:g} mm, "
+                 f"mu = {a['mu']:g}", fontsize=10)
+    ax.set_xlim(0, None)
+    ax.set_ylim(0, None)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return True
+
+
+def _fill_text(run, a) -> str:
+    """'48 mm (0.80 silo widths)' of a run's settled fill height."""
+    top = run["settled_height"]
+    return f"{top * 1e3:.0f} mm ({top / (2 * a['silo_radius']):.2f} silo widths)"
 
 
 def report(out, argv) -> str:
@@ -185,9 +228,10 @@ def report(out, argv) -> str:
              f"`python tools/silo.py {' '.join(argv)}`".rstrip() + "",
              "",
              f"Silo radius {a['silo_radius'] * 1e3:g} mm, {out['n']} spheres of diameter "
-             f"d = {2e3 * a['radius']:g} mm (2500 kg/m^3, e = 0.5, mu = {a['mu']}), fill "
-             f"{a['fill'] * 1e3:g} mm, bulk density rho_b = {out['rho_b']:.0f} kg/m^3; rate "
-             f"fitted over [{a['transient']}, {a['duration']}] s.",
+             f"d = {2e3 * a['radius']:g} mm (2500 kg/m^3, e = 0.5, mu = {a['mu']}), a lattice "
+             f"fill {a['fill'] * 1e3:g} mm high settled to {_fill_text(out, a)}, bulk density "
+             f"rho_b = {out['rho_b']:.0f} kg/m^3; rate fitted over [{a['transient']}, "
+             f"{a['duration']}] s.",
              "",
              "| D / d | W [kg/s] | samples | discharged | wall s / sim s |",
              "|---|---|---|---|---|"]
@@ -200,10 +244,10 @@ def report(out, argv) -> str:
                       "Mankoc et al. 2007)."]
     for f in out["fills"]:
         first = out["orifices"][0]["rate"]
-        lines += ["", f"Fill height {f['fill'] * 1e3:g} mm ({f['n']} spheres), D = "
-                      f"{a['orifices'][0]:g} d: W = {f['rate']:.4g} kg/s, "
-                      f"{100 * (f['rate'] / first - 1):+.1f} % from the "
-                      f"{a['fill'] * 1e3:g} mm fill."]
+        lines += ["", f"Lattice fill {f['fill'] * 1e3:g} mm ({f['n']} spheres) settled to "
+                      f"{_fill_text(f, a)}, D = {a['orifices'][0]:g} d: W = "
+                      f"{f['rate']:.4g} kg/s, {100 * (f['rate'] / first - 1):+.1f} % from the "
+                      f"first fill."]
     return "\n".join(lines)
 
 
@@ -219,7 +263,9 @@ def main(argv=None):
     text = report(out, shown)
     print(text)
     if a.write:
-        write_section(os.path.join(DOCS, "granular.md"), "silo", text)
+        write_section(os.path.join(DOCS, "granular.md"), a.section, text)
+        if plot_beverloo(out, os.path.join(DOCS, f"{a.section}_beverloo.png")):
+            print(f"wrote docs/{a.section}_beverloo.png")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,214 @@
+#!/usr/bin/env python3
+"""Heaps side by side with LAMMPS (GRANULAR, Hertz-Mindlin with sds rolling and
+twisting resistance): the same scene, friction and rolling friction, the heap's angle
+and height from both codes, one thread each.
+
+Setups (``--setup``):
+- ``funnel`` (default): scenes/heap.toml as tools/heap.py runs it: spheres run out of
+  a funnel (a cone below a cylinder) onto a round platform (a flat cone, spheres
+  outside it), building a heap whose angle is measured on the platform. Its geometry
+  becomes LAMMPS regions under fix wall/gran/region: containers (``inside``) the
+  lateral surface of a ``cone`` or ``cylinder`` along z with open ends, obstacles
+  closed solids; the platform (a cone 1 mm tall, 60 mm in radius) a disc at its mean
+  height, because LAMMPS lets spheres through so shallow a cone.
+- ``column``: a column of spheres on a jittered square lattice (spacing 2.2 r, tools/
+  lammps_silo.py ``fill_lattice``) inside a radius ``--column``, released at rest on
+  the box floor, collapsing into a low deposit.
+Both codes start from the same positions and velocities. The angle is measured from
+the surface profile as in tools/heap.py (the highest sphere top in radial bins one
+diameter wide, a straight line between 20 % and 80 % of the heap's height).
+taichi_spheres: hard spheres, Walton impacts, the contact solver with Coulomb friction
+and rolling resistance (torque <= mu_r r_eff F_n). LAMMPS: tools/lammps_silo.py's
+contact model (Hertz, E = 5e9 Pa, nu = 0.3, damping from the restitution, Mindlin
+friction mu, sds rolling and twisting limited to mu_r r_eff F_n) for pairs, the box's
+faces (fix wall/gran planes) and the geometry, dt = 5e-6 s. LAMMPS runs in a second
+process beside taichi_spheres, one thread each (a machine with two cores or more).
+
+    python tools/peer_lammps_heap.py --mu 0.3 0.6 --mu-r 0.1
+    python tools/peer_lammps_heap.py --setup column --count 1500 --duration 1.5
+    python tools/peer_lammps_heap.py --write        # the 'peer-heap' section of docs/granular.md
+"""
+from __future__ import annotations
+
+import argparse
+import concurrent.futures
+import datetime
+import math
+import multiprocessing
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, HERE)
+
+import heap  # noqa: E402  (tools/heap.py)
+import lammps_silo  # noqa: E402  (tools/lammps_silo.py)
+from machine import cpu_name, write_section  # noqa: E402
+
+DENSITY = 2500.0
+#: an outside cone shorter than this fraction of its radius becomes a disc in LAMMPS
+FLAT = 0.05
+
+
+def column_scene(a):
+    """(scene, base) of the column setup: spheres at rest in a radius a.column about the
+    box's vertical axis; base: tools/heap.py repose_angle arguments."""
+    import taichi_spheres as ts
+    centre = np.array([a.box / 2, a.box / 2])
+    x = lammps_silo.fill_lattice(a.count, a.radius, a.column, 0.0, centre, seed=a.seed)
+    hi = np.array([a.box, a.box, float(x[:, 2].max()) + 2 * a.radius])
+    scene = ts.Scene.from_arrays(x, np.zeros_like(x), a.radius, density=DENSITY,
+                                 box=(np.zeros(3), hi), gravity=(0, 0, -lammps_silo.G),
+                                 restitution=a.e, wall_restitution=a.e)
+    return scene, dict(floor=0.0, centre=centre)
+
+
+def funnel_scene(a):
+    """(scene, base) of the funnel setup (scenes/heap.toml; tools/heap.py's base)."""
+    import taichi_spheres as ts
+    scene = ts.load_scene(a.scene)
+    return scene, dict(floor=0.14, below=0.195, centre=(0.15, 0.15), within=0.06)
+
+
+def lammps_region(k, g) -> str:
+    """LAMMPS region command of geometry object g (a ts.Cone or ts.Cylinder along +z or
+    -z, named geo<k>)."""
+    import taichi_spheres as ts
+    axis = np.asarray(g.axis, float)
+    if abs(abs(axis[2]) - 1) > 1e-12:
+        raise ValueError(f"geometry[{k}]: only cones and cylinders along z have a region here")
+    if isinstance(g, ts.Cylinder):
+        r0 = r1 = g.radius
+    elif isinstance(g, ts.Cone):
+        r0, r1 = g.radius_at_point, g.radius_at_end
+    else:
+        raise ValueError(f"geometry[{k}]: {type(g).__name__} has no region here")
+    z0, z1 = g.point[2], g.point[2] + axis[2] * g.length
+    (lo, rlo), (hi, rhi) = sorted([(z0, r0), (z1, r1)])
+    if not g.inside and g.length < FLAT * max(r0, r1):
+        # a flat cone (a platform): LAMMPS's cone contacts let spheres through so
+        # shallow a surface; a disc at its mean height stands for it
+        top = 0.5 * (lo + hi)
+        return (f"region geo{k} cylinder z {g.point[0]:.10g} {g.point[1]:.10g} "
+                f"{max(r0, r1):.10g} {top - 10 * g.length:.10g} {top:.10g} side out units box")
+    kind = f"cylinder z {g.point[0]:.10g} {g.point[1]:.10g} {r0:.10g}" if r0 == r1 else \
+        f"cone z {g.point[0]:.10g} {g.point[1]:.10g} {rlo:.10g} {rhi:.10g}"
+    # a container (inside) is its open lateral surface; an obstacle (outside, such as
+    # a platform) a closed solid, so that spheres passing its rim meet its end face
+    ends = "side in open 1 open 2" if g.inside else "side out"
+    return f"region geo{k} {kind} {lo:.10g} {hi:.10g} {ends} units box"
+
+
+def taichi_run(a, scene, mu, mu_r, base) -> dict:
+    """tools/heap.py's run of the scene with friction mu and rolling friction mu_r."""
+    return heap.run_heap(scene, mu, mu_r, a.duration, 0.0, 1, base)
+
+
+def lammps_run(a, scene, mu, mu_r, base) -> dict:
+    """Angle, height and wall seconds of LAMMPS from the scene's spheres and geometry."""
+    lammps = lammps_silo.import_lammps()
+    n = scene.n
+    roll = lammps_silo.rolling_defaults(scene.radius, scene.mass, a.dt)
+    pad = np.full(3, 4 * float(scene.radius.max()))   # room for LAMMPS's bins
+    lmp = lammps_silo.create_system(lammps, scene.x, scene.radius, scene.mass,
+                                    scene.box_lo - pad, scene.box_hi + pad, a.dt, 1)
+    nl = lmp.extract_global("nlocal")
+    ids = np.array(lmp.numpy.extract_atom("id")[:nl]) - 1
+    lmp.numpy.extract_atom("v")[:nl] = scene.v[ids]
+    r = float(scene.radius.mean())
+    lmp.command("pair_style granular")
+    lmp.command("pair_coeff * * " + lammps_silo.contact_model(
+        a.young, 0.3, scene.restitution, mu, mu_r, roll, r / 2))
+    wall = lammps_silo.contact_model(a.young, 0.3, scene.wall_restitution, mu, mu_r, roll, r)
+    for k, axis in enumerate("xyz"):
+        lmp.command(f"fix wall_{axis} all wall/gran granular {wall} {axis}plane "
+                    f"{scene.box_lo[k]:.10g} {scene.box_hi[k]:.10g}")
+    for k, g in enumerate(scene.geometry):
+        lmp.command(lammps_region(k, g))
+        lmp.command(f"fix wall_geo{k} all wall/gran/region granular {wall} region geo{k}")
+    lmp.command("run 0 post no")
+    t0 = time.perf_counter()
+    lmp.command(f"run {int(round(a.duration / a.dt))} pre no post no")
+    seconds = time.perf_counter() - t0
+    nl = lmp.extract_global("nlocal")
+    ids = np.array(lmp.numpy.extract_atom("id")[:nl]) - 1
+    x = np.full((n, 3), np.nan)
+    x[ids] = np.array(lmp.numpy.extract_atom("x")[:nl])
+    version = lammps_silo.lammps_version(lmp)
+    lmp.close()
+    angle, height, _ = heap.repose_angle(x[ids], scene.radius[ids], **base)
+    return dict(angle=angle, height=height, wall_seconds=seconds, lost=n - len(ids),
+                version=version)
+
+
+def report(rows, argv, a, scene, version) -> str:
+    what = (f"`{os.path.relpath(a.scene, os.path.join(HERE, '..'))}`" if a.setup == "funnel"
+            else f"a column of radius {1e3 * a.column:g} mm released at rest on the floor")
+    lines = [f"Measured {datetime.date.today()} on {cpu_name()}, 1 thread each: "
+             f"`python tools/peer_lammps_heap.py {' '.join(argv)}`".rstrip(), "",
+             f"{scene.n} spheres of d = {2e3 * float(scene.radius[0]):g} mm, {what}; heap "
+             f"after {a.duration:g} s. {version}: E = {a.young:g} Pa, nu = 0.3, "
+             f"dt = {a.dt:g} s.", "",
+             "| mu | mu_r | code | angle [deg] | height [mm] | wall s |",
+             "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['mu']:g} | {r['mu_r']:g} | {r['code']} | {r['angle']:.1f} | "
+                     f"{1e3 * r['height']:.1f} | {r['wall']:.0f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--setup", choices=["funnel", "column"], default="funnel")
+    p.add_argument("--scene", default=os.path.join(HERE, "..", "scenes", "heap.toml"))
+    p.add_argument("--mu", type=float, nargs="+", default=[0.3, 0.6])
+    p.add_argument("--mu-r", type=float, nargs="+", default=[0.1])
+    p.add_argument("--count", type=int, default=1500)
+    p.add_argument("--radius", type=float, default=0.003)
+    p.add_argument("--column", type=float, default=0.03, help="column radius [m]")
+    p.add_argument("--box", type=float, default=0.3, help="box side [m]")
+    p.add_argument("--duration", type=float, default=3.0)
+    p.add_argument("--e", type=float, default=0.5)
+    p.add_argument("--young", type=float, default=5e9)
+    p.add_argument("--dt", type=float, default=5e-6)
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--codes", nargs="+", default=["taichi_spheres", "lammps"])
+    p.add_argument("--write", action="store_true")
+    a = p.parse_args(argv)
+    scene, base = (funnel_scene if a.setup == "funnel" else column_scene)(a)
+    rows, version = [], "LAMMPS"
+    # LAMMPS runs in a second process beside taichi_spheres (one core each)
+    context = multiprocessing.get_context("spawn")
+    with concurrent.futures.ProcessPoolExecutor(1, mp_context=context) as pool:
+        for mu in a.mu:
+            for mu_r in a.mu_r:
+                pending = pool.submit(lammps_run, a, scene, mu, mu_r, base) \
+                    if "lammps" in a.codes else None
+                runs = []
+                if "taichi_spheres" in a.codes:
+                    runs.append(("taichi_spheres", taichi_run(a, scene, mu, mu_r, base)))
+                if pending is not None:
+                    try:
+                        out = pending.result()
+                        version = out["version"]
+                    except Exception as exc:           # LAMMPS stopped: say so, go on
+                        print(f"LAMMPS failed at mu {mu}, mu_r {mu_r}: {exc}", flush=True)
+                        out = dict(angle=math.nan, height=math.nan, wall_seconds=math.nan)
+                    runs.append(("LAMMPS", out))
+                for code, out in runs:
+                    rows.append(dict(mu=mu, mu_r=mu_r, code=code, wall=out["wall_seconds"],
+                                     angle=out["angle"], height=out["height"]))
+                    print(rows[-1], flush=True)
+    text = report(rows, [s for s in argv if s != "--write"], a, scene, version)
+    print(text)
+    if a.write:
+        write_section(os.path.join(HERE, "..", "docs", "granular.md"), "peer-heap", text)
+
+
+if __name__ == "__main__":
+    main()

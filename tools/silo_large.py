@@ -1,0 +1,119 @@
+#!/usr/bin/env python3
+"""Cost of a large silo discharge (10^5 spheres by default) per thread count.
+
+The silo of tools/silo.py (flat floor with a centred orifice, a cylinder wall, a sink
+below; e = 0.5, mu = 0.5, density 2500 kg/m^3) is filled with ``--count`` spheres on
+its jittered lattice (spacing 2.2 r, as tools/silo.py ``fill_positions``). With
+``--settle`` > 0 the fill first settles with the orifice closed (untimed); the orifice
+(``--orifice`` diameters) is then open and the discharge runs ``--duration`` s, after
+one untimed sample that compiles the kernels. Reported per thread count: wall seconds
+per simulated second, steps, contact rows and velocity sweeps per step, spheres
+discharged, the largest overlap.
+
+    python tools/silo_large.py                          # 10^5 spheres, 1 and 2 threads
+    python tools/silo_large.py --count 20000 --threads 2 --no-write
+    python tools/silo_large.py --write                  # the 'silo-large' section of docs/bench.md
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import os
+import sys
+import time
+import types
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, HERE)
+
+import taichi_spheres as ts  # noqa: E402
+import silo  # noqa: E402  (tools/silo.py)
+from machine import cpu_name, write_section  # noqa: E402
+
+
+def fill_height(count, radius, silo_radius) -> float:
+    """Lattice height [m] that holds about ``count`` spheres in the silo."""
+    step = 2.2 * radius
+    per_layer = math.pi * (silo_radius - radius) ** 2 / step ** 2
+    return (count / per_layer + 1) * step
+
+
+def run(a, threads) -> dict:
+    """One discharge on ``threads`` threads (module docstring)."""
+    settings = types.SimpleNamespace(silo_radius=a.silo_radius, radius=a.radius, mu=0.5,
+                                     fill=fill_height(a.count, a.radius, a.silo_radius))
+    c = a.silo_radius + 0.005
+    x = silo.fill_positions(a.silo_radius, a.radius, settings.fill, 0.05, np.array([c, c]), 1)
+    x = x[:a.count]
+    hole = a.orifice * a.radius
+    state = None
+    if a.settle > 0:
+        closed = ts.Simulation(silo.silo_scene(x, np.zeros_like(x), None, settings, None),
+                               threads=threads)
+        closed.advance(a.settle)
+        st = closed.state()
+        state = (st.x, st.v, st.omega)
+    sim = ts.Simulation(silo.silo_scene(x, np.zeros_like(x), None, settings, hole),
+                        threads=threads)
+    if state is not None:
+        sim.set_state(*state[:2], omega=state[2])
+    sim.advance(0.01)                          # compiles outside the timed part
+    s0 = dict(sim.stats)
+    t0, w0 = sim.time, time.perf_counter()
+    sim.advance_to(t0 + a.duration)
+    wall = time.perf_counter() - w0
+    s = sim.stats
+    steps = s["steps"] - s0["steps"]
+    return dict(threads=threads, n=len(x), wall_per_sim=wall / (sim.time - t0), steps=steps,
+                rows=(s["contacts"] - s0["contacts"]) / max(steps, 1),
+                sweeps=(s["contact_iterations"] - s0["contact_iterations"]) / max(steps, 1),
+                discharged=s["discharged"], overlap=s["max_overlap"],
+                arch=sim.runtime.arch if hasattr(sim, "runtime") else "cpu")
+
+
+def report(rows, argv, a) -> str:
+    lines = [f"Measured {datetime.date.today()} on {cpu_name()}: "
+             f"`python tools/silo_large.py {' '.join(argv)}`".rstrip(), "",
+             f"{rows[0]['n']} spheres of d = {2e3 * a.radius:g} mm in a silo of radius "
+             f"{1e3 * a.silo_radius:g} mm, orifice D = {a.orifice:g} d; "
+             + (f"settled {a.settle:g} s with the orifice closed, then " if a.settle > 0
+                else "from the lattice fill (the bed compacts while it discharges), ")
+             + f"{a.duration:g} s of discharge timed.", "",
+             "| threads | wall s / sim s | steps | rows / step | sweeps / step | "
+             "discharged | max overlap / d |", "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['threads']} | {r['wall_per_sim']:.0f} | {r['steps']} | "
+                     f"{r['rows']:.0f} | {r['sweeps']:.0f} | {r['discharged']} | "
+                     f"{r['overlap']:.1e} |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--count", type=int, default=100_000)
+    p.add_argument("--radius", type=float, default=0.001, help="sphere radius [m]")
+    p.add_argument("--silo-radius", type=float, default=0.04, help="[m]")
+    p.add_argument("--orifice", type=float, default=8.0, help="orifice diameter / d")
+    p.add_argument("--settle", type=float, default=0.0, help="[s], orifice closed")
+    p.add_argument("--duration", type=float, default=0.02, help="timed discharge [s]")
+    p.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    p.add_argument("--write", action="store_true")
+    p.add_argument("--no-write", dest="write", action="store_false")
+    a = p.parse_args(argv)
+    rows = []
+    for threads in a.threads:
+        rows.append(run(a, threads))
+        print(rows[-1], flush=True)
+    text = report(rows, [s for s in argv if s != "--write"], a)
+    print(text)
+    if a.write:
+        write_section(os.path.join(HERE, "..", "docs", "bench.md"), "silo-large", text)
+
+
+if __name__ == "__main__":
+    main()
