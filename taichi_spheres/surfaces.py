@@ -199,6 +199,8 @@ class Surfaces:
                 after = ut + ti.cast(3.5, self.real) / m * p
                 loss += ti.cast(1 / 7, self.real) * m * (ut.norm_sqr() - after.norm_sqr())
                 dv += p / m
+                if ti.static(self.f.rolling):
+                    self.surface_rolling(i, r, -(1 + e) * un * m)
             self.state.x[i] += dv * s
             self.state.v[i] = v + dv
             self.state.moved[i] += dv.norm() * s

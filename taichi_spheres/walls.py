@@ -24,7 +24,8 @@ kinetic energy, counted in ``stats['wall_rests']``.
 import taichi as ti
 
 from .config import DEFAULT, Tuning
-from .contacts.friction import contact_velocity, spin_change, tangential_part, walton_impulse
+from .contacts.friction import (contact_velocity, rolling_impulse, rolling_loss, spin_change,
+                                tangential_part, walton_impulse)
 from .params import StepParams
 from .state import Features, SphereState
 from .surfaces import Surfaces
@@ -216,7 +217,23 @@ class Motion(Surfaces):
         after = ut + ti.cast(3.5, self.real) * dv
         ti.atomic_add(self.params.energy_wall_restitution[None],
                       ti.cast(1 / 7, self.real) * m * (ut.norm_sqr() - after.norm_sqr()))
+        if ti.static(self.f.rolling):
+            self.surface_rolling(i, r, m * jn)
         return x + dv * s, v + dv, moved + dv.norm() * s
+
+    @ti.func
+    def surface_rolling(self, i, r, jn):
+        """Rolling resistance of an impact of sphere i (radius r [m]) on a wall or
+        geometry surface with normal impulse jn [N s] (contacts/friction.py; mu_r: the
+        sphere's material's); the energy goes to params.energy_wall_restitution."""
+        inv_i = self.state.inv_inertia_of(i)
+        w = self.state.omega[i]
+        m = self.state.material_of(i)
+        p = rolling_impulse(w, inv_i, ti.cast(0, self.real),
+                            self.params.rolling_of(m, m) * r * jn)
+        self.state.omega[i] += inv_i * p
+        ti.atomic_add(self.params.energy_wall_restitution[None],
+                      rolling_loss(w, inv_i, ti.cast(0, self.real), p))
 
     @ti.func
     def persistent(self, i, w, acc, s):

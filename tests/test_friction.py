@@ -256,3 +256,74 @@ def test_checkpoint_after_a_discharge_and_an_empty_simulation(arch):
     budget = sim.energy_budget()
     assert budget["current"] == 0.0
     assert abs(budget["unaccounted"]) < 1e-12 * budget["initial"]
+
+
+def _rolling_step(w1, w2, inv1, inv2, limit):
+    """Closed form of the impact's rolling resistance (contacts/friction.py)."""
+    rel = w1 - w2
+    p = -rel / (inv1 + inv2)
+    size = np.linalg.norm(p)
+    if size > limit:
+        p *= limit / size
+    return w1 + inv1 * p, w2 - inv2 * p
+
+
+@pytest.mark.parametrize("w1", [(0, 40, -10), (0, 4000, -1000)])
+def test_pair_impact_with_rolling_friction(arch, w1):
+    """With rolling friction mu_r an impact is Walton's, then an angular impulse opposing
+    the relative spin bounded by mu_r r_eff J_n (stopping it when small: first case;
+    limited: second): spins as that closed form, angular momentum conserved, energy
+    removed."""
+    e, mu, mu_r, beta0 = 0.5, 0.3, 0.2, 0.35
+    r = np.array([0.01, 0.015])
+    n = np.array([-0.8, -0.36, 0.48])
+    n /= np.linalg.norm(n)
+    x = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.5]])
+    x[1] -= n * r.sum()
+    v = np.array([[0.6, 0.2, -0.3], [-0.4, 0.1, 0.05]])
+    w = np.array([w1, (20.0, 0.0, 30.0)], dtype=float)
+    m = 1000 * 4 / 3 * np.pi * r ** 3
+    sc = ts.Scene.from_arrays(x, v, r, box=((0, 0, 0), (1, 1, 1)), gravity=(0, 0, 0),
+                              restitution=e, friction=mu, tangential_restitution=beta0,
+                              rolling_friction=mu_r, omega=w)
+    sim = ts.Simulation(sc, arch=arch, precision="f64")
+    before = sim.state()
+    sim.advance(1e-3)
+    st = sim.state()
+    assert sim.stats["pair_collisions"] == 1
+    want = walton_impact(v[0], v[1], w[0], w[1], r[0], r[1], m[0], m[1], n, e, mu, beta0)
+    meff = m[0] * m[1] / m.sum()
+    jn = (1 + e) * meff * abs((v[0] - v[1]) @ n)
+    inv = 1 / (0.4 * m * r ** 2)
+    w_a, w_b = _rolling_step(want[2], want[3], inv[0], inv[1], mu_r * r.prod() / r.sum() * jn)
+    scale = np.abs(v).max()
+    for got, exp in zip((st.v[0], st.v[1]), want[:2]):
+        assert np.abs(got - exp).max() < 1e-12 * scale
+    for got, exp, ri in zip((st.omega[0], st.omega[1]), (w_a, w_b), r):
+        assert np.abs(got - exp).max() * ri < 1e-12 * scale
+    l0 = observe.angular_momentum(before)
+    assert np.abs(observe.angular_momentum(st) - l0).max() < 1e-12 * np.abs(l0).max()
+    assert observe.total_energy(st, (0, 0, 0)) < observe.total_energy(before, (0, 0, 0))
+    budget = sim.energy_budget()
+    assert abs(budget["unaccounted"]) <= 1e-12 * abs(budget["initial"])
+
+
+def test_wall_impact_with_rolling_friction(arch):
+    """A spinning sphere hitting the floor: Walton's impact, then its spin reduced by
+    at most mu_r r J_n / I (the sphere's material's mu_r)."""
+    e, mu, mu_r, beta0, r = 0.9, 0.2, 0.1, 0.4, 0.01
+    v = np.array([0.7, -0.2, -1.0])
+    w0 = np.array([0.0, -300.0, 50.0])
+    sc = _one([0.5, 0.5, r * 1.5], v, r, omega=w0, gravity=(0, 0, 0), wall_restitution=e,
+              wall_friction=mu, tangential_restitution=beta0, rolling_friction=mu_r)
+    sim = ts.Simulation(sc, arch=arch, precision="f64")
+    sim.advance(0.01)
+    st = sim.state()
+    m = 1000 * 4 / 3 * np.pi * r ** 3
+    want = walton_impact(v, np.zeros(3), w0, np.zeros(3), r, 0.0, m, math.inf,
+                         np.array([0.0, 0.0, 1.0]), e, mu, beta0)
+    w_a, _ = _rolling_step(want[2], np.zeros(3), 1 / (0.4 * m * r * r), 0.0,
+                           mu_r * r * (1 + e) * m * 1.0)
+    assert sim.stats["wall_collisions"] == 1
+    assert np.abs(st.v[0] - want[0]).max() < 1e-13
+    assert np.abs(st.omega[0] - w_a).max() * r < 1e-13

@@ -22,6 +22,14 @@ tangential elasticity (beta0 = 0 in the sticking bound: slip is slowed, never
 reversed), so that a scene with friction and default settings has frictional impacts.
 The impulse acts at the contact point, so the angular momentum of the pair about it
 is conserved, and it never adds energy (|beta| <= 1).
+
+Rolling resistance at impacts (rolling friction mu_r > 0): after Walton's impulse, an
+angular impulse P_r on a (-P_r on b) opposes the relative spin w_a - w_b (rolling and
+twisting alike, as the contact solver's rolling rows), up to stopping it, bounded by
+``mu_r r_eff J_n`` (r_eff = r_a r_b / (r_a + r_b), r_a on a wall): the impulse of a
+rolling torque bounded by mu_r r_eff times the normal force, over the impact. Equal
+and opposite on the pair, it conserves their angular momentum; it only removes
+energy.
 """
 
 import taichi as ti
@@ -54,6 +62,25 @@ def walton_impulse(ut, jn, meff, mu, beta_max):
         stick = (1 + beta_max) * ti.static(TANGENTIAL_MASS) * meff * speed
         out = -ti.min(stick, mu * jn) / speed * ut
     return out
+
+
+@ti.func
+def rolling_impulse(rel_spin, inv_ia, inv_ib, limit):
+    """Angular impulse [N m s] on sphere a opposing the relative spin rel_spin = w_a -
+    w_b [rad/s] (module docstring): the one that stops it, -rel_spin / (1/I_a + 1/I_b),
+    shortened to ``limit`` (mu_r r_eff J_n) if longer; inv_ib = 0 for a wall."""
+    out = rel_spin / (inv_ia + inv_ib) * -1
+    size = out.norm()
+    if size > limit:
+        out *= limit / size
+    return out
+
+
+@ti.func
+def rolling_loss(rel_spin, inv_ia, inv_ib, impulse):
+    """Rotational energy [J] the angular impulse on a (minus it on b) removes: -P.(w_a -
+    w_b) - |P|^2 (1/I_a + 1/I_b) / 2 (>= 0 for rolling_impulse's P)."""
+    return -impulse.dot(rel_spin) - 0.5 * (inv_ia + inv_ib) * impulse.norm_sqr()
 
 
 @ti.func
