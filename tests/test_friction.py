@@ -27,6 +27,33 @@ def _one(x, v, r, omega=None, box=((0, 0, 0), (1, 1, 1)), **kw):
                                 omega=None if omega is None else np.atleast_2d(omega), **kw)
 
 
+def oblique_pair(w1, arch, **kw):
+    """(Simulation, (v, w, r, m, n)) of two spheres (radii 10 and 15 mm, water density)
+    touching along an oblique normal n and approaching, with spins w1 and (20, 0, 30)
+    rad/s, no gravity; kw: the restitution and friction arguments of the scene."""
+    r = np.array([0.01, 0.015])
+    n = np.array([-0.8, -0.36, 0.48])
+    n /= np.linalg.norm(n)
+    x = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.5]])
+    x[1] -= n * r.sum()
+    v = np.array([[0.6, 0.2, -0.3], [-0.4, 0.1, 0.05]])
+    w = np.array([w1, (20.0, 0.0, 30.0)], dtype=float)
+    m = 1000 * 4 / 3 * np.pi * r ** 3
+    sc = ts.Scene.from_arrays(x, v, r, box=((0, 0, 0), (1, 1, 1)), gravity=(0, 0, 0),
+                              omega=w, **kw)
+    return ts.Simulation(sc, arch=arch, precision="f64"), (v, w, r, m, n)
+
+
+def assert_impact(st, v, r, want_v, want_w):
+    """Velocities and spins (as surface speeds) of the pair within 1e-12 of the largest
+    speed before the impact."""
+    scale = np.abs(v).max()
+    for got, exp in zip((st.v[0], st.v[1]), want_v):
+        assert np.abs(got - exp).max() < 1e-12 * scale
+    for got, exp, ri in zip((st.omega[0], st.omega[1]), want_w, r):
+        assert np.abs(got - exp).max() * ri < 1e-12 * scale
+
+
 def test_sliding_sphere_rolls_at_five_sevenths(arch, precision):
     """v0 on the floor with no spin: slides with deceleration mu g until t = 2 v0 / (7 mu
     g), then rolls at 5/7 v0 with omega = v / r (angular momentum about the contact)."""
@@ -78,28 +105,14 @@ def test_oblique_pair_impact_follows_walton(arch, beta0, w1):
     equal Walton's closed form, and the total angular momentum (orbital + spin) is
     conserved, to round-off."""
     e, mu = 0.97, 0.092
-    r = np.array([0.01, 0.015])
-    n = np.array([-0.8, -0.36, 0.48])
-    n /= np.linalg.norm(n)
-    x = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.5]])
-    x[1] -= n * r.sum()
-    v = np.array([[0.6, 0.2, -0.3], [-0.4, 0.1, 0.05]])
-    w = np.array([w1, (20.0, 0.0, 30.0)], dtype=float)
-    m = 1000 * 4 / 3 * np.pi * r ** 3
-    sc = ts.Scene.from_arrays(x, v, r, box=((0, 0, 0), (1, 1, 1)), gravity=(0, 0, 0),
-                              restitution=e, friction=mu, tangential_restitution=beta0,
-                              omega=w)
-    sim = ts.Simulation(sc, arch=arch, precision="f64")
+    sim, (v, w, r, m, n) = oblique_pair(w1, arch, restitution=e, friction=mu,
+                                        tangential_restitution=beta0)
     before = sim.state()
     sim.advance(1e-3)
     st = sim.state()
     assert sim.stats["pair_collisions"] == 1
     want = walton_impact(v[0], v[1], w[0], w[1], r[0], r[1], m[0], m[1], n, e, mu, beta0)
-    scale = np.abs(v).max()
-    for got, exp in zip((st.v[0], st.v[1]), want[:2]):
-        assert np.abs(got - exp).max() < 1e-12 * scale
-    for got, exp, ri in zip((st.omega[0], st.omega[1]), want[2:], r):
-        assert np.abs(got - exp).max() * ri < 1e-12 * scale
+    assert_impact(st, v, r, want[:2], want[2:])
     l0 = observe.angular_momentum(before)
     l1 = observe.angular_momentum(st)
     assert np.abs(l1 - l0).max() < 1e-12 * np.abs(l0).max()
@@ -277,18 +290,8 @@ def test_pair_impact_with_rolling_friction(arch, w1):
     limited: second): spins as that closed form, angular momentum conserved, energy
     removed."""
     e, mu, mu_r, beta0 = 0.5, 0.3, 0.2, 0.35
-    r = np.array([0.01, 0.015])
-    n = np.array([-0.8, -0.36, 0.48])
-    n /= np.linalg.norm(n)
-    x = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.5]])
-    x[1] -= n * r.sum()
-    v = np.array([[0.6, 0.2, -0.3], [-0.4, 0.1, 0.05]])
-    w = np.array([w1, (20.0, 0.0, 30.0)], dtype=float)
-    m = 1000 * 4 / 3 * np.pi * r ** 3
-    sc = ts.Scene.from_arrays(x, v, r, box=((0, 0, 0), (1, 1, 1)), gravity=(0, 0, 0),
-                              restitution=e, friction=mu, tangential_restitution=beta0,
-                              rolling_friction=mu_r, omega=w)
-    sim = ts.Simulation(sc, arch=arch, precision="f64")
+    sim, (v, w, r, m, n) = oblique_pair(w1, arch, restitution=e, friction=mu,
+                                        tangential_restitution=beta0, rolling_friction=mu_r)
     before = sim.state()
     sim.advance(1e-3)
     st = sim.state()
@@ -298,11 +301,7 @@ def test_pair_impact_with_rolling_friction(arch, w1):
     jn = (1 + e) * meff * abs((v[0] - v[1]) @ n)
     inv = 1 / (0.4 * m * r ** 2)
     w_a, w_b = _rolling_step(want[2], want[3], inv[0], inv[1], mu_r * r.prod() / r.sum() * jn)
-    scale = np.abs(v).max()
-    for got, exp in zip((st.v[0], st.v[1]), want[:2]):
-        assert np.abs(got - exp).max() < 1e-12 * scale
-    for got, exp, ri in zip((st.omega[0], st.omega[1]), (w_a, w_b), r):
-        assert np.abs(got - exp).max() * ri < 1e-12 * scale
+    assert_impact(st, v, r, want[:2], (w_a, w_b))
     l0 = observe.angular_momentum(before)
     assert np.abs(observe.angular_momentum(st) - l0).max() < 1e-12 * np.abs(l0).max()
     assert observe.total_energy(st, (0, 0, 0)) < observe.total_energy(before, (0, 0, 0))

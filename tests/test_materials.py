@@ -13,6 +13,8 @@ from taichi_spheres.builders import gas
 from taichi_spheres.reference import EventDrivenReference, walton_impact
 from taichi_spheres.state import Features
 
+from test_friction import assert_impact, oblique_pair
+
 G = 9.81
 GLASS = ts.Material("glass", restitution=0.97, friction=0.092)
 RUBBER = ts.Material("rubber", restitution=0.6, friction=0.8, rolling_friction=0.05)
@@ -121,27 +123,12 @@ def test_one_material_keeps_the_bits_of_a_scene_without_materials(arch, precisio
 
 def test_oblique_impact_of_two_materials_follows_walton(arch):
     """Glass meeting rubber: Walton's impact with the pair's e 0.6 and mu 0.092."""
-    r = np.array([0.01, 0.015])
-    n = np.array([-0.8, -0.36, 0.48])
-    n /= np.linalg.norm(n)
-    x = np.array([[0.5, 0.5, 0.5], [0.5, 0.5, 0.5]])
-    x[1] -= n * r.sum()
-    v = np.array([[0.6, 0.2, -0.3], [-0.4, 0.1, 0.05]])
-    w = np.array([[0.0, 400.0, -100.0], [20.0, 0.0, 30.0]])
-    m = 1000 * 4 / 3 * np.pi * r ** 3
-    sc = ts.Scene.from_arrays(x, v, r, box=((0, 0, 0), (1, 1, 1)), gravity=(0, 0, 0),
-                              tangential_restitution=0.35, omega=w, materials=[GLASS, RUBBER],
-                              material=[0, 1])
-    sim = ts.Simulation(sc, arch=arch, precision="f64")
+    sim, (v, w, r, m, n) = oblique_pair((0.0, 400.0, -100.0), arch, tangential_restitution=0.35,
+                                        materials=[GLASS, RUBBER], material=[0, 1])
     sim.advance(1e-3)
-    st = sim.state()
     assert sim.stats["pair_collisions"] == 1
     want = walton_impact(v[0], v[1], w[0], w[1], r[0], r[1], m[0], m[1], n, 0.6, 0.092, 0.35)
-    scale = np.abs(v).max()
-    for got, exp in zip((st.v[0], st.v[1]), want[:2]):
-        assert np.abs(got - exp).max() < 1e-12 * scale
-    for got, exp, ri in zip((st.omega[0], st.omega[1]), want[2:], r):
-        assert np.abs(got - exp).max() * ri < 1e-12 * scale
+    assert_impact(sim.state(), v, r, want[:2], want[2:])
 
 
 def test_rolling_friction_of_each_material_on_the_floor(arch):
