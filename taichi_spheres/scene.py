@@ -114,19 +114,22 @@ class Scene:
         materials (materials.pair_table; read-only)."""
         return self._pair_values
 
+    def used_pair_values(self) -> np.ndarray:
+        """The rows and columns of :meth:`pair_values` of the materials spheres use."""
+        used = np.unique(self.material)
+        return self.pair_values()[np.ix_(used, used)]
+
     @property
     def varied_materials(self) -> bool:
         """True when pairs of spheres in this scene have different pair values (the
         engine then looks them up per pair)."""
-        used = np.unique(self.material)
-        table = self.pair_values()[np.ix_(used, used)]
+        table = self.used_pair_values()
         return bool(np.any(table != table[0, 0]))
 
     @property
     def elastic_pairs(self) -> bool:
         """True when every pair of materials the spheres use has restitution 1."""
-        used = np.unique(self.material)
-        return bool(np.all(self.pair_values()[np.ix_(used, used)][..., 0] == 1.0))
+        return bool(np.all(self.used_pair_values()[..., 0] == 1.0))
 
     @property
     def frictional(self) -> bool:
