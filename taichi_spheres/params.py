@@ -121,12 +121,8 @@ class StepParams:
     def bind_materials(self, scene):
         """Load the pair values: the scalars from the material of sphere 0 (all pairs
         alike without Features.materials), the tables from scene.pair_values()."""
-        if hasattr(scene, "pair_values"):
-            table = scene.pair_values()
-            m0 = int(scene.material[0])
-        else:
-            table = np.array([[[scene.restitution, 0.0, 0.0]]])
-            m0 = 0
+        table = scene.pair_values()
+        m0 = int(scene.material[0])
         self.e[None], self.mu[None], self.mu_roll[None] = (float(c) for c in table[m0, m0])
         if self.materials:
             full = np.zeros((MAX_MATERIALS, MAX_MATERIALS, 3))

@@ -96,13 +96,9 @@ class EventDrivenReference:
         self._g = np.asarray(scene.gravity, dtype=np.float64).copy()
         self._r = np.asarray(scene.radius, dtype=np.float64).copy()
         self._m = np.asarray(scene.mass, dtype=np.float64).copy()
-        self._e = float(scene.restitution)
-        if hasattr(scene, "pair_values"):    # per-material pair restitution (materials.py)
-            self._e_pair = scene.pair_values()[..., 0]
-            self._material = np.asarray(scene.material)
-        else:
-            self._e_pair = np.full((1, 1), self._e)
-            self._material = np.zeros(n, dtype=np.int32)
+        # pair restitution per pair of materials (materials.py)
+        self._e_pair = scene.pair_values()[..., 0]
+        self._material = np.asarray(scene.material)
         self._ew = float(scene.wall_restitution)
         gnorm = float(np.linalg.norm(self._g))
         if rest_speed is None:
