@@ -81,18 +81,35 @@ class GaussSeidel:
 
     @ti.func
     def sweep_colour(self, colour, mode: ti.template(), serial: ti.template()):
-        """One pass over the cells of one colour (disjoint blocks: no two threads touch a
-        sphere)."""
-        sx = self.colour_table[colour, 0]
-        sy = self.colour_table[colour, 1]
-        sz = self.colour_table[colour, 2]
+        """One pass over the cells of one colour that own rows (disjoint blocks: no two
+        threads touch a sphere), in list_active_cells order."""
         ti.loop_config(serialize=serial)
-        for t in range(sx[2] * sy[2] * sz[2]):
-            iz = t % sz[2]
-            iy = (t // sz[2]) % sy[2]
-            ix = t // (sz[2] * sy[2])
-            c = ti.Vector([sx[0] + sx[1] * ix, sy[0] + sy[1] * iy, sz[0] + sz[1] * iz])
-            self.sweep_cell(self.grid.linear(c), mode)
+        for t in range(self.colour_active[colour], self.colour_active[colour + 1]):
+            self.sweep_cell(self.active_cells[t], mode)
+
+    @ti.func
+    def list_active_cells(self):
+        """active_cells: the cells of each colour that own rows, in the order the colour
+        table walks them (x slowest, z fastest); colour_active[c]: where colour c's
+        start (kernel top level, serial: O(cells) once per step, where the sweeps visit
+        only these cells)."""
+        total = 0
+        ti.loop_config(serialize=True)
+        for colour in range(self.n_colours_f[None]):
+            self.colour_active[colour] = total
+            sx = self.colour_table[colour, 0]
+            sy = self.colour_table[colour, 1]
+            sz = self.colour_table[colour, 2]
+            for t in range(sx[2] * sy[2] * sz[2]):
+                iz = t % sz[2]
+                iy = (t // sz[2]) % sy[2]
+                ix = t // (sz[2] * sy[2])
+                c = ti.Vector([sx[0] + sx[1] * ix, sy[0] + sy[1] * iy, sz[0] + sz[1] * iz])
+                k = self.grid.linear(c)
+                if ti.min(self.cell_start[k + 1], ti.static(self.capacity)) > self.cell_start[k]:
+                    self.active_cells[total] = k
+                    total += 1
+        self.colour_active[self.n_colours_f[None]] = total
 
     @ti.func
     def set_tolerances(self):

@@ -82,6 +82,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
             a: b and lambda; warm_n: (N,) i32 rows kept (more than warm_slots: none);
             warm_t, warm_r: (N, warm_slots) vec3 — lam_t and lam_r of those rows
         colour_table: (MAX_COLOURS, 3) vec3 i32 — (start, stride, count) per axis
+        active_cells: (M,) i32, colour_active: (MAX_COLOURS + 1,) i32 — the cells that
+            own rows, colour by colour (pgs.list_active_cells)
     """
 
     def __init__(self, state: SphereState, grid: Grid, params: StepParams, pairs,
@@ -126,6 +128,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
         self.warm_t = ti.Vector.field(3, real, shape=(cap, slots)) if friction else None
         self.warm_r = ti.Vector.field(3, real, shape=(cap, slots)) if rolling else None
         self.colour_table = ti.Vector.field(3, ti.i32, shape=(MAX_COLOURS, 3))
+        self.active_cells = ti.field(ti.i32, shape=cells)
+        self.colour_active = ti.field(ti.i32, shape=MAX_COLOURS + 1)
         self.n_colours = 0
         self.margin = ti.field(real, shape=())       # speculative margin [m]
         self.h_prev = ti.field(real, shape=())       # length of the last solved step [s]
@@ -247,6 +251,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
         def solve_serial():
             self.set_tolerances()
             self.gather()
+            self.list_active_cells()
             self.prepare_rows()
             self.warm_start_serially()
             params.contact_iterations[None] = self.iterate_serially(
@@ -261,6 +266,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
         def start() -> ti.i32:
             self.set_tolerances()
             self.gather()
+            self.list_active_cells()
             self.prepare_rows()
             return self.n_rows[None]
 
