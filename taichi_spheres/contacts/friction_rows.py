@@ -76,21 +76,24 @@ class FrictionRows:
 
     @ti.func
     def push_tangent(self, a, b, n, impulse):
-        """Apply a tangential impulse [N s] on a at the contact (-impulse on b)."""
-        self.state.v[a] += impulse * self.inv_mass(a)
-        self.state.omega[a] += spin_change(self.state.rad(a), self.state.inv_inertia_of(a),
-                                           n, impulse)
+        """Apply a tangential impulse [N s] on a at the contact (-impulse on b); plain
+        stores, not atomics (GaussSeidel.push)."""
+        v, omega = ti.static(self.state.v, self.state.omega)
+        v[a] = v[a] + impulse * self.inv_mass(a)
+        omega[a] = omega[a] + spin_change(self.state.rad(a), self.state.inv_inertia_of(a),
+                                          n, impulse)
         if b >= 0:
-            self.state.v[b] -= impulse * self.inv_mass(b)
-            self.state.omega[b] += spin_change(self.state.rad(b),
-                                               self.state.inv_inertia_of(b), n, impulse)
+            v[b] = v[b] - impulse * self.inv_mass(b)
+            omega[b] = omega[b] + spin_change(self.state.rad(b),
+                                              self.state.inv_inertia_of(b), n, impulse)
 
     @ti.func
     def push_rolling(self, a, b, impulse):
-        """Apply an angular impulse [N m s] on a (-impulse on b)."""
-        self.state.omega[a] += impulse * self.state.inv_inertia_of(a)
+        """Apply an angular impulse [N m s] on a (-impulse on b); plain stores."""
+        omega = ti.static(self.state.omega)
+        omega[a] = omega[a] + impulse * self.state.inv_inertia_of(a)
         if b >= 0:
-            self.state.omega[b] -= impulse * self.state.inv_inertia_of(b)
+            omega[b] = omega[b] - impulse * self.state.inv_inertia_of(b)
 
     @ti.func
     def friction_row(self, s):

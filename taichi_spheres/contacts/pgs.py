@@ -28,10 +28,14 @@ class GaussSeidel:
 
     @ti.func
     def push(self, field: ti.template(), a, b, n, impulse):
-        """Apply a normal impulse [N s] (or pseudo-impulse) to row (a, b)."""
-        field[a] += impulse * self.inv_mass(a) * n
+        """Apply a normal impulse [N s] (or pseudo-impulse) to row (a, b). Plain
+        read-modify-write, not ``+=``: a parallel loop would make that an atomic add
+        (a compare-and-swap loop per f64 component on the CPU, ~3x the row's cost),
+        and the colours already keep two threads off one sphere (same sums, same
+        bits)."""
+        field[a] = field[a] + impulse * self.inv_mass(a) * n
         if b >= 0:
-            field[b] -= impulse * self.inv_mass(b) * n
+            field[b] = field[b] - impulse * self.inv_mass(b) * n
 
     @ti.func
     def solve_row(self, s, mode: ti.template()):
