@@ -270,20 +270,20 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
             self.prepare_rows()
             return self.n_rows[None]
 
-        # one kernel per mode (a template argument costs Python dispatch per launch);
-        # the first colour of a sweep resets the residual, every launch returns it
-        @ti.kernel
-        def warm(colour: ti.i32):
-            self.sweep_colour(colour, WARM, False)
-
-        def sweep_kernel(mode):
+        # one kernel per mode and colour count (a template argument costs Python
+        # dispatch per launch): a launch is one sweep, every colour in turn (each
+        # colour's loop a parallel task of its own), and returns the residual
+        def sweep_kernel(mode, colours):
             @ti.kernel
-            def sweep(colour: ti.i32, first: ti.i32) -> real:
-                if first == 1:
-                    self.residual[None] = 0
-                self.sweep_colour(colour, mode, False)
+            def sweep() -> real:
+                self.residual[None] = 0
+                for colour in ti.static(range(colours)):
+                    self.sweep_colour(colour, mode, False)
                 return self.residual[None]
             return sweep
+
+        self._sweep_kernel = sweep_kernel
+        self._sweeps = {}
 
         @ti.kernel
         def middle():
@@ -297,22 +297,26 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
 
         self._solve_serial = solve_serial
         self._start, self._middle, self._end = start, middle, end
-        self._warm = warm
-        self._sweeps = {mode: sweep_kernel(mode) for mode in (VELOCITY, POSITION)}
+
+    def _sweep(self, mode):
+        """The one-sweep kernel of ``mode`` for the bound colour count (built once)."""
+        key = (mode, self.n_colours)
+        if key not in self._sweeps:
+            self._sweeps[key] = self._sweep_kernel(mode, self.n_colours)
+        return self._sweeps[key]
 
     def solve(self) -> None:
         """Gather the rows of the current state (grid freshly built) and solve them for a
         step of length params.h; counters go to params (contacts, contact_iterations,
         contact_residual, position_iterations, energy_contacts, contact_overlap). On
         the CPU below Performance.serial_solver_below spheres the sweeps run serially
-        in one launch (a parallel launch per colour and sweep costs ~150 us there)."""
+        in one launch (a parallel launch per sweep costs ~150 us there)."""
         if self.serial or (self.cpu and self.n < self.perf.serial_solver_below):
             self._solve_serial()      # the same sweeps in one launch: the same bits
             return
         self._start()
         if self.rules.warm_start:
-            for colour in range(self.n_colours):
-                self._warm(colour)
+            self._sweep(WARM)()
         iterations = self._iterate(VELOCITY, self.rules.contact_iterations, self.tol_v)
         self.params.contact_residual[None] = self.residual[None]
         self._middle()
@@ -320,13 +324,12 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
         self._end(iterations, positions)
 
     def _iterate(self, mode, cap, tol) -> int:
-        """iterate_serially with one parallel launch per colour (same sweeps, same bits)."""
+        """iterate_serially with one launch per sweep (same sweeps, same bits)."""
         limit = tol[None]
-        sweep = self._sweeps[mode]
+        sweep = self._sweep(mode)
         it = 0
         while it < cap:
-            for colour in range(self.n_colours):
-                residual = sweep(colour, int(colour == 0))
+            residual = sweep()
             it += 1
             if not residual > limit:
                 break
