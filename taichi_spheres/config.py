@@ -98,7 +98,7 @@ class Performance:
     wide_margin: cells aim at the largest diameter plus this many times the largest
         move per step.
     serial_solver_below: below this many spheres the CPU runs the contact solver's
-        sweeps serially in one launch (same bits as one launch per colour).
+        sweeps serially in one launch (same bits as one parallel launch per sweep).
     contacts_per_sphere: contact rows the solver has room for, per sphere (a pair
         counts once; a dense pack of equal spheres has about 3 plus walls).
     warm_slots: warm-start impulses kept per sphere (for the rows where it is the

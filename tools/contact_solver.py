@@ -100,10 +100,11 @@ def bed_with_caps(p, caps):
         tuning = Tuning().with_(contact_iterations=vel, position_iterations=pos)
         sim = ts.Simulation(p["scene"], tuning=tuning)
         sim.restore(p["at_t1"])
-        sim.advance(0.01)                                # compile
+        sim.advance_to(p["t2"])          # untimed: compiles every kernel the window needs
+        sim.restore(p["at_t1"])
         wall, _ = window(sim, p["t2"])
         st = sim.state()
-        out[(vel, pos)] = dict(wall=wall / (p["t2"] - p["t1"] - 0.01),
+        out[(vel, pos)] = dict(wall=wall / (p["t2"] - p["t1"]),
                                overlap=max_overlap(st, p["scene"]),
                                ke=ts.observe.kinetic_energy(st))
     return out
@@ -204,7 +205,7 @@ def report(args, p, cols, warm, beds, capped) -> str:
         lines += [f"FCC bed: a flat lattice block (10 sphere layers, r = 0.01 m) in a box that "
                   f"fits it on x and y, settled 0.5 s, then held {args.bed_time:g} s; "
                   "Performance defaults (serial sweeps below 30,000 spheres, else one "
-                  "parallel launch per colour and sweep).", "",
+                  "parallel launch per sweep).", "",
                   "| FCC bed held | threads | wall s per simulated s | steps | velocity sweeps "
                   "per step | largest speed [m/s] | overlap / diameter |",
                   "|---|---|---|---|---|---|---|"]
