@@ -40,6 +40,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 sys.path.insert(0, os.path.dirname(__file__))
 
 import taichi_spheres as ts  # noqa: E402
+from taichi_spheres.config import Tuning  # noqa: E402
 from machine import cpu_name, write_section  # noqa: E402  (tools/machine.py)
 
 G = 9.81
@@ -76,13 +77,24 @@ def silo_scene(x, v, omega, a, hole, radius=None):
         sinks=[ts.Sink((0, 0, 0), (2 * c, 2 * c, floor - 4 * a.radius))])
 
 
+def engine_options(a) -> dict:
+    """Simulation keywords of the command line: threads, step_fraction and the contact
+    solver's velocity and position sweep caps (None: the defaults)."""
+    tuning = Tuning()
+    if getattr(a, "sweeps", None) is not None:
+        tuning = tuning.with_(contact_iterations=a.sweeps)
+    if getattr(a, "position_sweeps", None) is not None:
+        tuning = tuning.with_(position_iterations=a.position_sweeps)
+    return dict(threads=a.threads, step_fraction=getattr(a, "step_fraction", 0.1), tuning=tuning)
+
+
 def settled_fill(a, height, seed):
     """(x, v, omega, rho_b, seconds, x_fill, top): the fill settled with the orifice
     closed, the lattice it started from, and the settled fill's height above the floor
     [m] (the mean height of its top 5 % of spheres)."""
     c = a.silo_radius + 0.005
     x = fill_positions(a.silo_radius, a.radius, height, 0.05, np.array([c, c]), seed)
-    sim = ts.Simulation(silo_scene(x, np.zeros_like(x), None, a, None), threads=a.threads)
+    sim = ts.Simulation(silo_scene(x, np.zeros_like(x), None, a, None), **engine_options(a))
     t0 = time.perf_counter()
     sim.advance(a.settle)
     st = sim.state()
@@ -100,7 +112,7 @@ def discharge(a, settled, hole):
     # Scene would refuse
     start = settled[5]
     sim = ts.Simulation(silo_scene(start, np.zeros_like(start), None, a, hole),
-                        threads=a.threads)
+                        **engine_options(a))
     sim.set_state(x, v, omega=omega)
     sim.advance(a.sample)                      # compile outside the timed loop
     times, mass = [sim.time], [sim.stats["discharged_mass"]]
@@ -146,6 +158,12 @@ def parse(argv=None):
     p.add_argument("--transient", type=float, default=0.15, help="start of the fit [s]")
     p.add_argument("--sample", type=float, default=0.02, help="sampling interval [s]")
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--step-fraction", type=float, default=0.1,
+                   help="Simulation step_fraction (default 0.1, the Simulation's)")
+    p.add_argument("--sweeps", type=int, default=None,
+                   help="the contact solver's velocity sweep cap (default: Rules')")
+    p.add_argument("--position-sweeps", type=int, default=None,
+                   help="the contact solver's position sweep cap (default: Rules')")
     p.add_argument("--write", action="store_true", help="write docs/granular.md's section")
     p.add_argument("--no-write", dest="write", action="store_false")
     p.add_argument("--json", help="also write the results to this JSON file")

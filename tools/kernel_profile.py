@@ -1,0 +1,124 @@
+#!/usr/bin/env python3
+"""Where a step's time goes: Taichi's kernel profiler over a window of a run, 1 thread.
+
+Two runs:
+
+- ``--scene TOML --at T``: the scene file, advanced to T s (untimed), then the window;
+- ``--silo``: the silo of tools/peer_lammps_silo.py (1,722 spheres of d = 6 mm, mu =
+  0.5, orifice 5 d), its fill settled 0.3 s with the orifice closed, then discharging:
+  the window starts 0.2 s into the discharge.
+
+The window (``--window`` s) runs twice from a checkpoint, the first time untimed (so
+that no kernel compiles in the second). Reported: steps, wall ms per step (profiler
+on), contact rows and sweeps per step, and each kernel's share of the kernel time with
+its mean ms per launch. Taichi names a kernel's tasks ``<kernel>_c<n>_<k>_kernel_<task>``:
+``solve_serial`` is the contact solver of the serial engines (its task 4 holds the
+velocity sweeps, task 6 the position sweeps, task 0 gathers the rows), ``sweep`` one
+parallel sweep, ``detect_*`` and ``build`` the grid and detection, ``drift`` the
+flight.
+
+    python tools/kernel_profile.py --scene scenes/pour.toml --at 1.0 --window 0.2
+    python tools/kernel_profile.py --silo --write
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, HERE)
+
+import taichi as ti  # noqa: E402
+from taichi.profiler.kernel_profiler import get_default_kernel_profiler  # noqa: E402
+
+import taichi_spheres as ts  # noqa: E402
+from taichi_spheres import runtime  # noqa: E402
+from machine import cpu_name, publish  # noqa: E402
+
+
+def silo_simulation():
+    """The silo of tools/peer_lammps_silo.py, settled and discharging (Simulation)."""
+    import silo  # noqa: E402  (tools/silo.py)
+    a = silo.parse(["--radius", "0.003", "--silo-radius", "0.045", "--fill", "0.09",
+                    "--settle", "0.3", "--threads", "1"])
+    settled = silo.settled_fill(a, a.fill, seed=1)
+    x, v, omega = settled[:3]
+    start = settled[5]
+    sim = ts.Simulation(silo.silo_scene(start, np.zeros_like(start), None, a, 5.0 * a.radius),
+                        **silo.engine_options(a))
+    sim.set_state(x, v, omega=omega)
+    sim.advance(0.2)
+    return sim
+
+
+def profile(sim, window: float) -> dict:
+    """Kernel profile of ``window`` s of ``sim`` (second pass from a checkpoint)."""
+    start = sim.checkpoint()
+    sim.advance(window)
+    sim.restore(start)
+    ti.profiler.clear_kernel_profiler_info()
+    before = dict(sim.stats)
+    t0 = time.perf_counter()
+    sim.advance(window)
+    wall = time.perf_counter() - t0
+    s = sim.stats
+    steps = s["steps"] - before["steps"]
+    prof = get_default_kernel_profiler()
+    prof._update_records()       # the table print_kernel_profiler_info builds, as data
+    prof._count_statistics()
+    kernels = {name: [r.total_time * 1e-3, r.counter]       # [s], launches
+               for name, r in prof._statistical_results.items()}
+    return dict(steps=steps, wall=wall, kernels=kernels,
+                rows=(s["contacts"] - before["contacts"]) / max(steps, 1),
+                vel=(s["contact_iterations"] - before["contact_iterations"]) / max(steps, 1),
+                pos=(s["position_iterations"] - before["position_iterations"]) / max(steps, 1))
+
+
+def report(args, label, p) -> str:
+    total = sum(t for t, _ in p["kernels"].values())
+    lines = [f"Measured {datetime.date.today()} on {cpu_name()}, 1 thread: "
+             f"`python tools/kernel_profile.py {' '.join(a for a in sys.argv[1:] if a != '--write')}`",
+             "",
+             f"{label}: {p['steps']} steps in {args.window} s, {1e3 * p['wall'] / p['steps']:.2f} "
+             f"wall ms per step with the profiler on ({1e3 * total / p['steps']:.2f} ms in "
+             f"kernels), {p['rows']:.0f} contact rows, {p['vel']:.1f} velocity and "
+             f"{p['pos']:.1f} position sweeps per step.", "",
+             "| kernel task | share of kernel time | ms per launch | launches per step |",
+             "|---|---|---|---|"]
+    for name, (t, n) in sorted(p["kernels"].items(), key=lambda kv: -kv[1][0])[:args.top]:
+        lines.append(f"| {name} | {100 * t / total:.1f} % | {1e3 * t / n:.3f} | {n / p['steps']:.2f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scene", default=None)
+    ap.add_argument("--at", type=float, default=0.0)
+    ap.add_argument("--silo", action="store_true")
+    ap.add_argument("--window", type=float, default=0.1)
+    ap.add_argument("--top", type=int, default=8)
+    ap.add_argument("--write", action="store_true")
+    args = ap.parse_args(argv)
+    if not args.silo and args.scene is None:
+        ap.error("give --scene TOML or --silo")
+    for mode in runtime.COMPILE_MODES.values():
+        mode["kernel_profiler"] = True
+    runtime.ensure("cpu", "f64", threads=1)
+    if args.silo:
+        sim, label, section = silo_simulation(), "Silo discharge (tools/peer_lammps_silo.py's)", "profile-silo"
+    else:
+        sim = ts.Simulation(ts.load_scene(args.scene), threads=1)
+        sim.advance_to(args.at)
+        name = os.path.splitext(os.path.basename(args.scene))[0]
+        label, section = f"`{args.scene}` from t = {args.at} s", f"profile-{name}"
+    publish(report(args, label, profile(sim, args.window)), section, args.write)
+
+
+if __name__ == "__main__":
+    main()
