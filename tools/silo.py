@@ -81,11 +81,11 @@ def engine_options(a) -> dict:
     """Simulation keywords of the command line: threads, step_fraction and the contact
     solver's velocity and position sweep caps (None: the defaults)."""
     tuning = Tuning()
-    if getattr(a, "sweeps", None) is not None:
+    if a.sweeps is not None:
         tuning = tuning.with_(contact_iterations=a.sweeps)
-    if getattr(a, "position_sweeps", None) is not None:
+    if a.position_sweeps is not None:
         tuning = tuning.with_(position_iterations=a.position_sweeps)
-    return dict(threads=a.threads, step_fraction=getattr(a, "step_fraction", 0.1), tuning=tuning)
+    return dict(threads=a.threads, step_fraction=a.step_fraction, tuning=tuning)
 
 
 def settled_fill(a, height, seed):

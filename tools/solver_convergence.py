@@ -201,7 +201,7 @@ def errors(v, truth, h, d) -> dict:
     return dict(max=float(e.max()), rms=float(np.sqrt(np.mean(e * e))), overlap=float(e.max() * h / d))
 
 
-def report(args, p, prob, res_true, pgs_rows, apgd_rows, check) -> str:
+def report(args, p, res_true, pgs_rows, apgd_rows, check) -> str:
     lines = [f"Measured {datetime.date.today()} on {cpu_name()}: "
              f"`python tools/solver_convergence.py{' --at ' + str(args.at) if args.at != 1.0 else ''}`",
              "",
@@ -241,7 +241,7 @@ def main(argv=None):
     pgs_rows = [(k, errors(by_pgs[k], truth, p["h"], p["d"])) for k in sorted(args.sweeps)]
     _, kept = apgd(prob, max(args.apgd), keep=set(args.apgd))
     apgd_rows = [(k, (kept[k][1], errors(kept[k][0], truth, p["h"], p["d"]))) for k in args.apgd]
-    publish(report(args, p, prob, res_true, pgs_rows, apgd_rows, check),
+    publish(report(args, p, res_true, pgs_rows, apgd_rows, check),
             "solver-convergence", args.write)
 
 
