@@ -28,8 +28,6 @@ import os
 import sys
 import time
 
-import numpy as np
-
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, HERE)
@@ -43,16 +41,11 @@ from machine import cpu_name, publish  # noqa: E402
 
 
 def silo_simulation():
-    """The silo of tools/peer_lammps_silo.py, settled and discharging (Simulation)."""
+    """The silo of tools/peer_lammps_silo.py, settled and 0.2 s into its discharge."""
+    import peer_lammps_silo  # noqa: E402  (tools/peer_lammps_silo.py)
     import silo  # noqa: E402  (tools/silo.py)
-    a = silo.parse(["--radius", "0.003", "--silo-radius", "0.045", "--fill", "0.09",
-                    "--settle", "0.3", "--threads", "1"])
-    settled = silo.settled_fill(a, a.fill, seed=1)
-    x, v, omega = settled[:3]
-    start = settled[5]
-    sim = ts.Simulation(silo.silo_scene(start, np.zeros_like(start), None, a, 5.0 * a.radius),
-                        **silo.engine_options(a))
-    sim.set_state(x, v, omega=omega)
+    a = peer_lammps_silo.settings([])
+    sim = silo.discharging(a, silo.settled_fill(a, a.fill, seed=1), a.orifice * a.radius)
     sim.advance(0.2)
     return sim
 

@@ -37,12 +37,25 @@ from machine import cpu_name, write_section  # noqa: E402
 from taichi_spheres.config import Rules  # noqa: E402
 
 
+#: the silo both codes run (tools/silo.py options; more on the command line)
+SILO = ["--radius", "0.003", "--silo-radius", "0.045", "--fill", "0.09", "--settle", "0.3",
+        "--duration", "0.6", "--threads", "1"]
+
+
+def settings(rest, orifice: float = 5.0):
+    """tools/silo.py's options for SILO plus ``rest``, with ``orifice`` (D / d)."""
+    a = silo.parse(SILO + list(rest))
+    a.orifice = orifice              # D / d, so that the orifice radius is D/d x r
+    return a
+
+
 def taichi_run(a, x):
-    """(times, discharged mass, wall seconds, discharged count) of taichi_spheres."""
+    """(times, discharged mass, wall seconds, discharged count, spheres, largest overlap
+    after a step / contact distance) of taichi_spheres."""
     settled = silo.settled_fill(a, a.fill, seed=1)
     times, mass, seconds, sim = silo.discharge(a, settled, a.orifice * a.radius)
-    taichi_run.overlap = sim.stats["max_overlap"]
-    return times, mass, seconds, int(sim.stats["discharged"]), len(settled[0])
+    return (times, mass, seconds, int(sim.stats["discharged"]), len(settled[0]),
+            sim.stats["max_overlap"])
 
 
 def lammps_run(a, x):
@@ -66,13 +79,11 @@ def main(argv=None):
     p.add_argument("--write", action="store_true")
     p.add_argument("--section", default="lammps", help="section of docs/granular.md to write")
     own, rest = p.parse_known_args(argv)
-    a = silo.parse(["--radius", "0.003", "--silo-radius", "0.045", "--fill", "0.09",
-                    "--settle", "0.3", "--duration", "0.6", "--threads", "1"] + rest)
-    a.orifice = own.orifice              # D / d, so that the orifice radius is D/d x r
+    a = settings(rest, own.orifice)
     c = a.silo_radius + 0.005
     x = silo.fill_positions(a.silo_radius, a.radius, a.fill, 0.05, np.array([c, c]), 1)
     rows = {}
-    t_times, t_mass, t_wall, t_count, n = taichi_run(a, x)
+    t_times, t_mass, t_wall, t_count, n, t_overlap = taichi_run(a, x)
     total = n * 2500.0 * 4 / 3 * math.pi * a.radius ** 3
     rows["taichi_spheres"] = (silo.steady_rate(t_times, t_mass, total, a.transient)[0], t_count,
                               t_wall / (t_times[-1] - t_times[0]))
@@ -94,7 +105,7 @@ def main(argv=None):
     (rt, _, wt), (rl, _, wl) = rows.values()
     lines += ["", f"Rate taichi_spheres / LAMMPS = {rt / rl:.3f}; LAMMPS / taichi_spheres "
                   f"wall time = {wl / wt:.2f}x. Largest overlap after a taichi_spheres step "
-                  f"in the discharge: {taichi_run.overlap:.1e} of the contact distance."]
+                  f"in the discharge: {t_overlap:.1e} of the contact distance."]
     text = "\n".join(lines)
     print(text)
     if own.write:

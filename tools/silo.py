@@ -103,9 +103,9 @@ def settled_fill(a, height, seed):
     return st.x, st.v, st.omega, rho_b, time.perf_counter() - t0, x, top
 
 
-def discharge(a, settled, hole):
-    """Times [s], discharged mass [kg], wall seconds and the Simulation of a discharge
-    through an orifice of radius ``hole`` from the settled state."""
+def discharging(a, settled, hole):
+    """The Simulation of the settled fill (settled_fill) with an orifice of radius
+    ``hole`` [m] open, at the start of its discharge."""
     x, v, omega = settled[:3]
     # the scene is built on the (valid) lattice and continues from the settled state:
     # that one may hold overlaps within the contact solver's tolerance, which a new
@@ -114,6 +114,13 @@ def discharge(a, settled, hole):
     sim = ts.Simulation(silo_scene(start, np.zeros_like(start), None, a, hole),
                         **engine_options(a))
     sim.set_state(x, v, omega=omega)
+    return sim
+
+
+def discharge(a, settled, hole):
+    """Times [s], discharged mass [kg], wall seconds and the Simulation of a discharge
+    through an orifice of radius ``hole`` from the settled state."""
+    sim = discharging(a, settled, hole)
     sim.advance(a.sample)                      # compile outside the timed loop
     times, mass = [sim.time], [sim.stats["discharged_mass"]]
     t0 = time.perf_counter()

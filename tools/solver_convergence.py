@@ -95,6 +95,7 @@ class Problem:
         self.im = p["inv_mass"]
         self.N = len(p["v"])
         self.v_free = p["v"] - self.scatter(p["lam"])
+        self.linear = self.gather(self.v_free) - p["target"]     # J v_free - target
 
     def scatter(self, lam):
         """M^-1 J^T lam as sphere velocities (N, 3)."""
@@ -118,7 +119,7 @@ class Problem:
         return self.gather(self.velocities(lam)) - self.p["target"]
 
     def value(self, lam):
-        return 0.5 * lam @ (self.gather(self.scatter(lam))) + lam @ (self.gather(self.v_free) - self.p["target"])
+        return 0.5 * lam @ (self.gather(self.scatter(lam))) + lam @ self.linear
 
     def residual(self, lam):
         """Largest projected-gradient component [m/s] (0 at the solution)."""

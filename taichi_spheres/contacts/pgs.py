@@ -94,9 +94,9 @@ class GaussSeidel:
     @ti.func
     def list_active_cells(self):
         """active_cells: the cells of each colour that own rows, in the order the colour
-        table walks them (x slowest, z fastest); colour_active[c]: where colour c's
-        start (kernel top level, serial: O(cells) once per step, where the sweeps visit
-        only these cells)."""
+        table walks them (x slowest, z fastest); colour c's cells are
+        active_cells[colour_active[c]:colour_active[c + 1]]. Kernel top level, serial:
+        O(cells) once per step, so that the sweeps visit only these cells."""
         total = 0
         ti.loop_config(serialize=True)
         for colour in range(self.n_colours_f[None]):
