@@ -43,6 +43,11 @@ class Rules:
         of the smallest diameter per sweep), and above which the projection pushes
         apart the overlaps left when a step without a contact solver hit the sweep
         limit.
+    shock_propagation: "auto", "on" or "off": after the velocity sweeps, one pass over
+        the rows from the floor up that pushes only the upper sphere of each row where
+        the sweeps left it sinking into the lower one (contacts/shock.py; scenes with
+        gravity). "auto": compiled in where the spheres' masses differ (mass ratios are
+        what the sweeps converge worst on), left out for equal masses.
     collapse_hits: from a sphere's collapse_hits-th collision in one step on, its
         impacts are perfectly inelastic in the normal direction (inelastic pairs only;
         a time-stepped stand-in for the TC model of Luding & McNamara 1998, needed
@@ -61,10 +66,21 @@ class Rules:
     relaxation: float = 1.0
     position_iterations: int = 100
     overlap_tolerance: float = 1e-4
+    shock_propagation: str = "auto"
     collapse_hits: int = 4
     max_wall_bounces: int = 8
     projection_iterations: int = 8
     projection_relaxation: float = 0.5
+
+
+    def __post_init__(self):
+        if self.shock_propagation not in SHOCK_MODES:
+            raise ValueError(f"tuning shock_propagation must be one of {', '.join(SHOCK_MODES)}, "
+                             f"got {self.shock_propagation!r}")
+
+
+#: values of Rules.shock_propagation
+SHOCK_MODES = ("auto", "on", "off")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -152,7 +168,9 @@ class Tuning:
 
 def _fits(value, default) -> bool:
     """value can stand for default: a bool for a bool, an int for an int, a number for a
-    float."""
+    float, a string for a string."""
+    if isinstance(default, str):
+        return isinstance(value, str)
     if isinstance(default, bool) or isinstance(value, bool):
         return isinstance(value, bool) and isinstance(default, bool)
     if isinstance(default, int):

@@ -9,10 +9,12 @@ columns, warm starting, and a large lattice bed held on 1 and 2 threads.
   sweep-limit hits and unresolved overlaps in the bed phase, velocity and position
   sweeps per step, the largest residual in the bed phase;
 - column: 20 equal spheres, and 20 with the upper half 10 and 10^3 times heavier, settling
-  on the floor for 3 s: largest speed, overlap, sweeps per step at the end;
+  on the floor for 3 s: largest speed, overlap, sweeps per step at the end (the 10^3
+  column also with Rules.shock_propagation off: unequal masses have it by default);
 - warm start: the settled column's velocity sweeps per step with and without it;
 - error against run time: the pour's bed phase again from its state at t1 with
-  velocity/position sweep caps 10, 30, 100 and 300;
+  velocity/position sweep caps 10, 30, 100 and 300, and 30 and 100 with shock
+  propagation on (equal masses: off by default);
 - bed: a flat FCC lattice block of --bed-n spheres (10 sphere layers) resting in a
   box that fits it, held for --bed-time s after 0.5 s of settling, on 1 and 2 threads (each in a child
   process: Taichi fixes the thread count at start): wall s per simulated s,
@@ -94,25 +96,27 @@ def pour(scene_path, t1, t2):
 
 def bed_with_caps(p, caps):
     """The pour's bed phase again from its t1 checkpoint with each (velocity, position)
-    sweep cap: wall s per simulated s, overlap and kinetic energy at t2."""
+    sweep cap and Rules.shock_propagation: wall s per simulated s, overlap and kinetic
+    energy at t2."""
     out = {}
-    for vel, pos in caps:
-        tuning = Tuning().with_(contact_iterations=vel, position_iterations=pos)
+    for vel, pos, shock in caps:
+        tuning = Tuning().with_(contact_iterations=vel, position_iterations=pos,
+                                shock_propagation=shock)
         sim = ts.Simulation(p["scene"], tuning=tuning)
         sim.restore(p["at_t1"])
         sim.advance_to(p["t2"])          # untimed: compiles every kernel the window needs
         sim.restore(p["at_t1"])
         wall, _ = window(sim, p["t2"])
         st = sim.state()
-        out[(vel, pos)] = dict(wall=wall / (p["t2"] - p["t1"]),
+        out[(vel, pos, shock)] = dict(wall=wall / (p["t2"] - p["t1"]),
                                overlap=max_overlap(st, p["scene"]),
                                ke=ts.observe.kinetic_energy(st))
     return out
 
 
-def column(ratio: float, seconds: float, warm_start=True):
+def column(ratio: float, seconds: float, warm_start=True, shock="auto"):
     """20 spheres r = 0.01 m on the floor, gaps 1e-4 m; the upper half ``ratio`` x
-    heavier."""
+    heavier (``shock``: Rules.shock_propagation)."""
     n, r = 20, 0.01
     x = np.zeros((n, 3))
     x[:, :2] = 0.05
@@ -122,7 +126,8 @@ def column(ratio: float, seconds: float, warm_start=True):
     scene = ts.Scene.from_arrays(x, np.zeros((n, 3)), np.full(n, r), mass=mass,
                                  box=((0, 0, 0), (0.1, 0.1, 0.6)), gravity=(0, 0, -G),
                                  restitution=0.5, wall_restitution=0.5)
-    sim = ts.Simulation(scene, tuning=Tuning().with_(warm_start=warm_start))
+    sim = ts.Simulation(scene, tuning=Tuning().with_(warm_start=warm_start,
+                                                     shock_propagation=shock))
     sim.advance(seconds - 0.5)
     _, c = window(sim, seconds)
     st = sim.state()
@@ -198,8 +203,9 @@ def report(args, p, cols, warm, beds, capped) -> str:
               "", "| velocity / position sweeps at most | wall s per simulated s | overlap / "
               f"diameter at {p['t2']:g} s | kinetic energy at {p['t2']:g} s [J] |",
               "|---|---|---|---|"]
-    for (vel, pos), c in capped.items():
-        lines.append(f"| {vel} / {pos} | {c['wall']:.2f} | {c['overlap']:.2e} | {c['ke']:.2e} |")
+    for (vel, pos, shock), c in capped.items():
+        lines.append(f"| {vel} / {pos}{', shock propagation on' if shock == 'on' else ''} | "
+                     f"{c['wall']:.2f} | {c['overlap']:.2e} | {c['ke']:.2e} |")
     lines.append("")
     if beds:
         lines += [f"FCC bed: a flat lattice block (10 sphere layers, r = 0.01 m) in a box that "
@@ -235,9 +241,11 @@ def main(argv=None):
     os.chdir(ROOT)
     p = pour(args.scene, *args.phases)
     cols = {"equal masses": column(1.0, 3.0), "upper half 10 x heavier": column(10.0, 3.0),
-            "upper half 10^3 x heavier": column(1e3, 3.0)}
+            "upper half 10^3 x heavier": column(1e3, 3.0),
+            "upper half 10^3 x heavier, shock propagation off": column(1e3, 3.0, shock="off")}
     warm = {w: column(1.0, 3.0, warm_start=w)["sweeps"] for w in (True, False)}
-    capped = bed_with_caps(p, [(10, 10), (30, 30), (100, 100), (300, 300)])
+    capped = bed_with_caps(p, [(10, 10, "auto"), (30, 30, "auto"), (100, 100, "auto"),
+                               (300, 300, "auto"), (30, 30, "on"), (100, 100, "on")])
     beds = {t: bed(args.bed_n, args.bed_time, t) for t in (1, 2)}
     publish(report(args, p, cols, warm, beds, capped), "contact-solver",
             args.write and not args.quick)

@@ -15,6 +15,8 @@ seconds per simulated second of the discharge, and their ratios.
     python tools/peer_lammps_silo.py                    # ~5 min on 2 cores
     python tools/peer_lammps_silo.py --write            # the 'lammps' section of docs/granular.md
     python tools/peer_lammps_silo.py --step-fraction 0.3 --sweeps 30 --write --section lammps-coarse
+    python tools/peer_lammps_silo.py --step-fraction 0.3 --sweeps 10 --position-sweeps 10 \
+        --shock --write --section lammps-shock
 """
 from __future__ import annotations
 
@@ -94,7 +96,8 @@ def main(argv=None):
              f"`python tools/peer_lammps_silo.py {' '.join(x for x in argv if x != '--write')}`".rstrip()
              + (f" (taichi_spheres: step_fraction {a.step_fraction:g}, velocity / position "
                 f"sweeps at most {a.sweeps or Rules().contact_iterations} / "
-                f"{a.position_sweeps or Rules().position_iterations})"),
+                f"{a.position_sweeps or Rules().position_iterations}"
+                f"{', shock propagation' if a.shock else ''})"),
              "", f"{n} spheres of d = {2e3 * a.radius:g} mm (2500 kg/m^3, e = 0.5, mu = "
                  f"{a.mu}), silo radius {1e3 * a.silo_radius:g} mm, orifice D = "
                  f"{own.orifice:g} d, settled {a.settle} s, discharge {a.duration} s, rate "

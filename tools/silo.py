@@ -78,13 +78,16 @@ def silo_scene(x, v, omega, a, hole, radius=None):
 
 
 def engine_options(a) -> dict:
-    """Simulation keywords of the command line: threads, step_fraction and the contact
-    solver's velocity and position sweep caps (None: the defaults)."""
+    """Simulation keywords of the command line: threads, step_fraction, the contact
+    solver's velocity and position sweep caps (None: the defaults) and its shock
+    propagation pass."""
     tuning = Tuning()
     if a.sweeps is not None:
         tuning = tuning.with_(contact_iterations=a.sweeps)
     if a.position_sweeps is not None:
         tuning = tuning.with_(position_iterations=a.position_sweeps)
+    if a.shock:
+        tuning = tuning.with_(shock_propagation="on")
     return dict(threads=a.threads, step_fraction=a.step_fraction, tuning=tuning)
 
 
@@ -171,6 +174,8 @@ def parse(argv=None):
                    help="the contact solver's velocity sweep cap (default: Rules')")
     p.add_argument("--position-sweeps", type=int, default=None,
                    help="the contact solver's position sweep cap (default: Rules')")
+    p.add_argument("--shock", action="store_true",
+                   help="switch on the contact solver's shock propagation pass")
     p.add_argument("--write", action="store_true", help="write docs/granular.md's section")
     p.add_argument("--no-write", dest="write", action="store_false")
     p.add_argument("--json", help="also write the results to this JSON file")

@@ -51,6 +51,7 @@ from ..state import Features, SphereState
 from .friction_rows import FrictionRows
 from .pgs import POSITION, VELOCITY, WARM, GaussSeidel
 from .rows import ContactRows
+from .shock import ShockPropagation
 from .sweeps import MAX_COLOURS
 
 __all__ = ["ContactSolver"]
@@ -58,7 +59,7 @@ __all__ = ["ContactSolver"]
 
 
 @ti.data_oriented
-class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
+class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
     """Contact rows and their projected Gauss–Seidel solve (module docstring).
 
     Fields (K = contacts_per_sphere x capacity rows, M = cells, N = spheres):
@@ -97,6 +98,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
         self.rules = tuning.physics
         self.perf = tuning.performance
         self.capacity = self.perf.contacts_per_sphere * state.capacity
+        mode = self.rules.shock_propagation
+        self.shock = features.gravity and (
+            mode == "on" or (mode == "auto" and not features.equal_masses))
         self._allocate(state.capacity, grid.cell_capacity)
         self._build_kernels()
 
@@ -139,6 +143,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
         self.tol_w = ti.field(real, shape=())        # pseudo-velocity tolerance [m/s]
         self.n_colours_f = ti.field(ti.i32, shape=())
         self.tol_len = ti.field(real, shape=())      # position tolerance [m] (bind)
+        if self.shock:
+            self._allocate_shock()
 
     def bind(self, scene, geom, reach=None):
         """Load a scene's grid geometry ``geom`` (colours; the speculative margin: the
@@ -257,6 +263,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
             params.contact_iterations[None] = self.iterate_serially(
                 VELOCITY, ti.static(rules.contact_iterations), self.tol_v)
             params.contact_residual[None] = self.residual[None]
+            if ti.static(self.shock):
+                self.shock_pass()
             self.position_targets()
             params.position_iterations[None] = self.iterate_serially(
                 POSITION, ti.static(rules.position_iterations), self.tol_w)
@@ -287,6 +295,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows):
 
         @ti.kernel
         def middle():
+            if ti.static(self.shock):
+                self.shock_pass()
             self.position_targets()
 
         @ti.kernel
