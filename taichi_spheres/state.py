@@ -85,7 +85,10 @@ class Features:
             "wall restitution: " + ("1, elastic (compiled out)" if self.elastic_walls
                                     else "inelastic"),
             "restitution model: " + ("smid" if self.smid else "normal"),
-            "contact solver: " + ("on (persistent contacts, split impulse)"
+            "contact solver: " + (("on (persistent contacts, split impulse, shock "
+                                   "propagation: masses differ)" if self.gravity and
+                                   not self.equal_masses else
+                                   "on (persistent contacts, split impulse)")
                                   if self.contacts else "off (compiled out)"),
             "friction and spin: " + (("on, with rolling friction" if self.rolling else "on")
                                      if self.friction else "off (no spin field, compiled out)"),
