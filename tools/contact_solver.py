@@ -17,10 +17,11 @@ columns, warm starting, and a large lattice bed held on 1 and 2 threads.
   propagation on (equal masses: off by default);
 - bed: a flat FCC lattice block of --bed-n spheres (10 sphere layers) resting in a
   box that fits it, held for --bed-time s after 0.5 s of settling, on 1 and 2 threads (each in a child
-  process: Taichi fixes the thread count at start): wall s per simulated s,
-  largest speed and overlap.
+  process: Taichi fixes the thread count at start), with shock propagation off (the
+  default for equal masses) and on (what its serial pass costs): wall s per simulated
+  s, largest speed and overlap.
 
-    python tools/contact_solver.py --write            # ~10 min on 2 cores
+    python tools/contact_solver.py --write            # ~20 min on 2 cores
     python tools/contact_solver.py --quick            # smaller, no write
 """
 from __future__ import annotations
@@ -153,10 +154,11 @@ def fcc_bed(n_target: int, layers: int = 5):
                                 gravity=(0, 0, -G), restitution=0.5, wall_restitution=0.5)
 
 
-def bed_child(n_target: int, hold: float, settle: float = 0.5) -> dict:
-    """Settle ``settle`` s, then hold ``hold`` s (this process's threads)."""
+def bed_child(n_target: int, hold: float, shock: str, settle: float = 0.5) -> dict:
+    """Settle ``settle`` s, then hold ``hold`` s (this process's threads;
+    Rules.shock_propagation ``shock``)."""
     scene = fcc_bed(n_target)
-    sim = ts.Simulation(scene)
+    sim = ts.Simulation(scene, tuning=Tuning().with_(shock_propagation=shock))
     sim.advance(settle)
     wall, c = window(sim, settle + hold)
     st = sim.state()
@@ -166,10 +168,10 @@ def bed_child(n_target: int, hold: float, settle: float = 0.5) -> dict:
                 steps=c["steps"], residual=sim.stats["contact_residual"])
 
 
-def bed(n_target, hold, threads):
+def bed(n_target, hold, threads, shock="auto"):
     """bed_child in a child process with ``threads`` CPU threads."""
     out = subprocess.run([sys.executable, __file__, "--child-bed", str(n_target), str(hold),
-                          "--threads", str(threads)], capture_output=True, text=True,
+                          shock, "--threads", str(threads)], capture_output=True, text=True,
                          check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -212,11 +214,13 @@ def report(args, p, cols, warm, beds, capped) -> str:
                   f"fits it on x and y, settled 0.5 s, then held {args.bed_time:g} s; "
                   "Performance defaults (serial sweeps below 30,000 spheres, else one "
                   "parallel launch per sweep).", "",
-                  "| FCC bed held | threads | wall s per simulated s | steps | velocity sweeps "
-                  "per step | largest speed [m/s] | overlap / diameter |",
-                  "|---|---|---|---|---|---|---|"]
-        for t, b in beds.items():
-            lines.append(f"| {b['n']} spheres | {t} | {b['wall_per_s']:.2f} | {b['steps']} | "
+                  "| FCC bed held | threads | shock propagation | wall s per simulated s | "
+                  "steps | velocity sweeps per step | largest speed [m/s] | overlap / diameter |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for (t, shock), b in beds.items():
+            lines.append(f"| {b['n']} spheres | {t} | "
+                         f"{'off (equal masses)' if shock == 'auto' else 'on'} | "
+                         f"{b['wall_per_s']:.2f} | {b['steps']} | "
                          f"{b['sweeps']:.1f} | {b['vmax']:.2e} | {b['overlap']:.2e} |")
     return "\n".join(lines) + "\n"
 
@@ -230,11 +234,12 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="0.3/0.6 s pour, 4,000-sphere bed")
     ap.add_argument("--write", action="store_true", help="write into docs/bench.md")
     ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--child-bed", nargs=2, default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--child-bed", nargs=3, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     ts.runtime.ensure("cpu", "f64", args.threads)
     if args.child_bed:
-        print(json.dumps(bed_child(int(args.child_bed[0]), float(args.child_bed[1]))))
+        print(json.dumps(bed_child(int(args.child_bed[0]), float(args.child_bed[1]),
+                                   args.child_bed[2])))
         return 0
     if args.quick:
         args.phases, args.bed_n = (0.3, 0.6), 4000
@@ -246,7 +251,8 @@ def main(argv=None):
     warm = {w: column(1.0, 3.0, warm_start=w)["sweeps"] for w in (True, False)}
     capped = bed_with_caps(p, [(10, 10, "auto"), (30, 30, "auto"), (100, 100, "auto"),
                                (300, 300, "auto"), (30, 30, "on"), (100, 100, "on")])
-    beds = {t: bed(args.bed_n, args.bed_time, t) for t in (1, 2)}
+    beds = {(t, shock): bed(args.bed_n, args.bed_time, t, shock)
+            for shock in ("auto", "on") for t in (1, 2)}
     publish(report(args, p, cols, warm, beds, capped), "contact-solver",
             args.write and not args.quick)
     return 0
