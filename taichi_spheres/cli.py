@@ -272,6 +272,8 @@ def check_work(scene: Scene, precision, duration, fps, step_fraction, force=Fals
 
 def cmd_info(scene: Scene, args):
     from . import runtime
+    from .config import DEFAULT
+    from .contacts.shock import shock_compiled
     from .grid import GridGeometry
     from .simulation import DEFAULT_STEP_FRACTION, estimate_field_bytes, rest_speed_for
     from .state import Features
@@ -295,7 +297,7 @@ def cmd_info(scene: Scene, args):
           f"step_fraction {fraction:g}")
     print(f"grid: {geom.dims[0]}x{geom.dims[1]}x{geom.dims[2]} cells, {len(geom.colours)} colours")
     print("compiled in:")
-    for line in features.describe():
+    for line in features.describe(shock_compiled(features, DEFAULT.physics)):
         print(f"  {line}")
     print(f"schedule ({args.arch}):")
     for line in schedule_for(scene, geom, args.arch, getattr(args, "fused", False)).describe():

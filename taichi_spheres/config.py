@@ -17,6 +17,10 @@ import dataclasses
 __all__ = ["Rules", "Performance", "Tuning", "DEFAULT"]
 
 
+#: values of Rules.shock_propagation
+SHOCK_MODES = ("auto", "on", "off")
+
+
 @dataclasses.dataclass(frozen=True)
 class Rules:
     """Physics rules: impacts, persistent contacts, inelastic collapse (docs/design.md).
@@ -46,8 +50,9 @@ class Rules:
     shock_propagation: "auto", "on" or "off": after the velocity sweeps, one pass over
         the rows from the floor up that pushes only the upper sphere of each row where
         the sweeps left it sinking into the lower one (contacts/shock.py; scenes with
-        gravity). "auto": compiled in where the spheres' masses differ (mass ratios are
-        what the sweeps converge worst on), left out for equal masses.
+        gravity, not along a periodic axis). "auto": compiled in where the spheres'
+        masses differ (mass ratios are what the sweeps converge worst on), left out for
+        equal masses.
     collapse_hits: from a sphere's collapse_hits-th collision in one step on, its
         impacts are perfectly inelastic in the normal direction (inelastic pairs only;
         a time-stepped stand-in for the TC model of Luding & McNamara 1998, needed
@@ -72,15 +77,11 @@ class Rules:
     projection_iterations: int = 8
     projection_relaxation: float = 0.5
 
-
     def __post_init__(self):
+        """ValueError naming shock_propagation if it is not one of SHOCK_MODES."""
         if self.shock_propagation not in SHOCK_MODES:
             raise ValueError(f"tuning shock_propagation must be one of {', '.join(SHOCK_MODES)}, "
                              f"got {self.shock_propagation!r}")
-
-
-#: values of Rules.shock_propagation
-SHOCK_MODES = ("auto", "on", "off")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -68,8 +68,9 @@ class Features:
     def periodic(self) -> bool:
         return not all(self.wall_axes)
 
-    def describe(self) -> list:
-        """Human-readable list of what is compiled in and out."""
+    def describe(self, shock: bool = False) -> list:
+        """Human-readable list of what is compiled in and out (``shock``: the contact
+        solver's shock propagation pass, contacts/shock.py ``shock_compiled``)."""
         axes = "xyz"
         return [
             "gravity: " + (", ".join(a for a, g in zip(axes, self.gravity_axes) if g)
@@ -85,10 +86,8 @@ class Features:
             "wall restitution: " + ("1, elastic (compiled out)" if self.elastic_walls
                                     else "inelastic"),
             "restitution model: " + ("smid" if self.smid else "normal"),
-            "contact solver: " + (("on (persistent contacts, split impulse, shock "
-                                   "propagation: masses differ)" if self.gravity and
-                                   not self.equal_masses else
-                                   "on (persistent contacts, split impulse)")
+            "contact solver: " + ("on (persistent contacts, split impulse"
+                                  + (", shock propagation)" if shock else ")")
                                   if self.contacts else "off (compiled out)"),
             "friction and spin: " + (("on, with rolling friction" if self.rolling else "on")
                                      if self.friction else "off (no spin field, compiled out)"),

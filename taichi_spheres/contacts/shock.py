@@ -25,12 +25,23 @@ A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 import taichi as ti
 
 
+def shock_compiled(features, rules) -> bool:
+    """Whether a scene with ``features`` (state.Features) runs the pass under ``rules``
+    (config.Rules): "on", or "auto" where the masses differ; never without gravity or
+    where gravity points along a periodic axis (no floor to propagate from)."""
+    floors = features.gravity and all(w for g, w in zip(features.gravity_axes,
+                                                        features.wall_axes) if g)
+    mode = rules.shock_propagation
+    return floors and (mode == "on" or (mode == "auto" and not features.equal_masses))
+
+
 class ShockPropagation:
     """The height order of the rows and the one-sided pass over them."""
 
     def _allocate_shock(self):
         """shock_key, shock_order: (K,) i32 — height bin of each row, rows by bin;
-        shock_start: (K + 1,) i32 — first place of each bin in shock_order."""
+        shock_start: (K + 1,) i32 — places in shock_order: each bin's first after the
+        prefix sum, its end after the rows are placed."""
         k = self.capacity
         self.shock_key = ti.field(ti.i32, shape=k)
         self.shock_order = ti.field(ti.i32, shape=k)
@@ -38,18 +49,19 @@ class ShockPropagation:
 
     @ti.func
     def height(self, p):
-        """Height of point p [m] along -gravity (relative units)."""
+        """Height of point p along -gravity times |g| [m^2/s^2] (an order, not a
+        length)."""
         return -self.params.gravity[None].dot(p)
 
     @ti.func
     def row_height(self, s):
-        """Height of row s's contact point [m] (normals point from b to a)."""
+        """height() of row s's contact point (normals point from b to a)."""
         a = self.row_a[s]
         return self.height(self.state.x[a] - self.state.rad(a) * self.normal[s])
 
     @ti.func
-    def order_by_height(self, rows):
-        """shock_order: the rows by height bin (counting sort, serial)."""
+    def height_bounds(self, rows):
+        """(lowest, highest) row height of the first ``rows`` rows (serial)."""
         lo = ti.cast(1e30, self.real)
         hi = ti.cast(-1e30, self.real)
         ti.loop_config(serialize=True)
@@ -57,13 +69,20 @@ class ShockPropagation:
             z = self.row_height(s)
             lo = ti.min(lo, z)
             hi = ti.max(hi, z)
+        return lo, hi
+
+    @ti.func
+    def order_by_height(self, rows):
+        """shock_order: the rows by height bin (counting sort, serial)."""
+        lo, hi = self.height_bounds(rows)
         span = ti.max(hi - lo, ti.cast(1e-30, self.real))
         ti.loop_config(serialize=True)
         for b in range(rows + 1):
             self.shock_start[b] = 0
         ti.loop_config(serialize=True)
         for s in range(rows):
-            key = ti.min(ti.cast((self.row_height(s) - lo) / span * rows, ti.i32), rows - 1)
+            key = ti.cast((self.row_height(s) - lo) / span * rows, ti.i32)
+            key = ti.max(ti.min(key, rows - 1), 0)
             self.shock_key[s] = key
             self.shock_start[key + 1] += 1
         ti.loop_config(serialize=True)
@@ -79,8 +98,9 @@ class ShockPropagation:
     def shock_row(self, s):
         """Row s with its lower sphere immovable: push the upper one (the sphere of a
         wall row) so that u_n >= target, if the sweeps left it short by more than the
-        velocity tolerance, only while it moves into the lower one and at most until
-        it leaves as fast; the push joins the row's accumulated impulse."""
+        velocity tolerance, only while the upper sphere moves towards the lower one and
+        at most until its own speed along the normal is zero. The push joins the row's
+        impulse, so the next step's warm start carries it (with its reaction)."""
         v = ti.static(self.state.v)
         a = self.row_a[s]
         b = self.row_b[s]
@@ -90,7 +110,7 @@ class ShockPropagation:
         rel = v[a]
         if b >= 0:
             rel = rel - v[b]
-            if self.height(self.state.x[b]) > self.height(self.state.x[a]):
+            if self.height(n) < 0:           # b above a (no periodic image needed)
                 up = b
                 sign = -1
         into = sign * v[up].dot(n)            # the upper sphere's speed away from the lower

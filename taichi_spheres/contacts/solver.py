@@ -51,7 +51,7 @@ from ..state import Features, SphereState
 from .friction_rows import FrictionRows
 from .pgs import POSITION, VELOCITY, WARM, GaussSeidel
 from .rows import ContactRows
-from .shock import ShockPropagation
+from .shock import ShockPropagation, shock_compiled
 from .sweeps import MAX_COLOURS
 
 __all__ = ["ContactSolver"]
@@ -98,9 +98,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         self.rules = tuning.physics
         self.perf = tuning.performance
         self.capacity = self.perf.contacts_per_sphere * state.capacity
-        mode = self.rules.shock_propagation
-        self.shock = features.gravity and (
-            mode == "on" or (mode == "auto" and not features.equal_masses))
+        self.shock = shock_compiled(features, self.rules)
         self._allocate(state.capacity, grid.cell_capacity)
         self._build_kernels()
 
