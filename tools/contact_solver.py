@@ -14,7 +14,8 @@ columns, warm starting, and a large lattice bed held on 1 and 2 threads.
 - warm start: the settled column's velocity sweeps per step with and without it;
 - error against run time: the pour's bed phase again from its state at t1 with
   velocity/position sweep caps 10, 30, 100 and 300, and 30 and 100 with shock
-  propagation on (equal masses: off by default);
+  propagation on (equal masses: off by default) or with over-relaxation 1.5
+  (Rules.relaxation; 1 by default);
 - bed: a flat FCC lattice block of --bed-n spheres (10 sphere layers) resting in a
   box that fits it, held for --bed-time s after 0.5 s of settling, on 1 and 2 threads (each in a child
   process: Taichi fixes the thread count at start), with shock propagation off (the
@@ -97,19 +98,19 @@ def pour(scene_path, t1, t2):
 
 def bed_with_caps(p, caps):
     """The pour's bed phase again from its t1 checkpoint with each (velocity, position)
-    sweep cap and Rules.shock_propagation: wall s per simulated s, overlap and kinetic
-    energy at t2."""
+    sweep cap, Rules.shock_propagation and Rules.relaxation: wall s per simulated s,
+    overlap and kinetic energy at t2."""
     out = {}
-    for vel, pos, shock in caps:
+    for vel, pos, shock, omega in caps:
         tuning = Tuning().with_(contact_iterations=vel, position_iterations=pos,
-                                shock_propagation=shock)
+                                shock_propagation=shock, relaxation=omega)
         sim = ts.Simulation(p["scene"], tuning=tuning)
         sim.restore(p["at_t1"])
         sim.advance_to(p["t2"])          # untimed: compiles every kernel the window needs
         sim.restore(p["at_t1"])
         wall, _ = window(sim, p["t2"])
         st = sim.state()
-        out[(vel, pos, shock)] = dict(wall=wall / (p["t2"] - p["t1"]),
+        out[(vel, pos, shock, omega)] = dict(wall=wall / (p["t2"] - p["t1"]),
                                overlap=max_overlap(st, p["scene"]),
                                ke=ts.observe.kinetic_energy(st))
     return out
@@ -201,12 +202,14 @@ def report(args, p, cols, warm, beds, capped) -> str:
     lines += ["", f"Warm start, settled column of 20: {warm[True]:.1f} velocity sweeps per "
               f"step with it, {warm[False]:.1f} without.", "",
               f"Error against run time, the pour's bed phase again from its t = {p['t1']:g} s "
-              "state with other sweep caps (Rules.contact_iterations, position_iterations):",
+              "state with other sweep caps (Rules.contact_iterations, position_iterations), "
+              "shock propagation or over-relaxation (Rules.relaxation):",
               "", "| velocity / position sweeps at most | wall s per simulated s | overlap / "
               f"diameter at {p['t2']:g} s | kinetic energy at {p['t2']:g} s [J] |",
               "|---|---|---|---|"]
-    for (vel, pos, shock), c in capped.items():
-        lines.append(f"| {vel} / {pos}{', shock propagation on' if shock == 'on' else ''} | "
+    for (vel, pos, shock, omega), c in capped.items():
+        lines.append(f"| {vel} / {pos}{', shock propagation on' if shock == 'on' else ''}"
+                     f"{f', relaxation {omega:g}' if omega != 1.0 else ''} | "
                      f"{c['wall']:.2f} | {c['overlap']:.2e} | {c['ke']:.2e} |")
     lines.append("")
     if beds:
@@ -249,8 +252,10 @@ def main(argv=None):
             "upper half 10^3 x heavier": column(1e3, 3.0),
             "upper half 10^3 x heavier, shock propagation off": column(1e3, 3.0, shock="off")}
     warm = {w: column(1.0, 3.0, warm_start=w)["sweeps"] for w in (True, False)}
-    capped = bed_with_caps(p, [(10, 10, "auto"), (30, 30, "auto"), (100, 100, "auto"),
-                               (300, 300, "auto"), (30, 30, "on"), (100, 100, "on")])
+    capped = bed_with_caps(p, [(10, 10, "auto", 1.0), (30, 30, "auto", 1.0),
+                               (100, 100, "auto", 1.0), (300, 300, "auto", 1.0),
+                               (30, 30, "on", 1.0), (100, 100, "on", 1.0),
+                               (30, 30, "auto", 1.5), (100, 100, "auto", 1.5)])
     beds = {(t, shock): bed(args.bed_n, args.bed_time, t, shock)
             for shock in ("auto", "on") for t in (1, 2)}
     publish(report(args, p, cols, warm, beds, capped), "contact-solver",
