@@ -37,7 +37,7 @@ from taichi.profiler.kernel_profiler import get_default_kernel_profiler  # noqa:
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres import runtime  # noqa: E402
-from machine import cpu_name, publish  # noqa: E402
+from machine import cpu_name, publish, untimed_pass  # noqa: E402
 
 
 def silo_simulation():
@@ -52,9 +52,7 @@ def silo_simulation():
 
 def profile(sim, window: float) -> dict:
     """Kernel profile of ``window`` s of ``sim`` (second pass from a checkpoint)."""
-    start = sim.checkpoint()
-    sim.advance(window)
-    sim.restore(start)
+    untimed_pass(sim, lambda s: s.advance(window))
     ti.profiler.clear_kernel_profiler_info()
     before = dict(sim.stats)
     t0 = time.perf_counter()
