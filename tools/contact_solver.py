@@ -14,8 +14,9 @@ columns, warm starting, and a large lattice bed held on 1 and 2 threads.
 - warm start: the settled column's velocity sweeps per step with and without it;
 - error against run time: the pour's bed phase again from its state at t1 with
   velocity/position sweep caps 10, 30, 100 and 300, and 30 and 100 with shock
-  propagation on (equal masses: off by default) or with over-relaxation 1.5
-  (Rules.relaxation; 1 by default);
+  propagation on (equal masses: off by default), with over-relaxation 1.5 and 1.8
+  (Rules.relaxation; 1 by default), and at step fraction 0.25 (default 0.1), each
+  with the largest growth of the total energy in one step;
 - bed: a flat FCC lattice block of --bed-n spheres (10 sphere layers) resting in a
   box that fits it, held for --bed-time s after 0.5 s of settling, on 1 and 2 threads (each in a child
   process: Taichi fixes the thread count at start), with shock propagation off (the
@@ -28,6 +29,7 @@ columns, warm starting, and a large lattice bed held on 1 and 2 threads.
 from __future__ import annotations
 
 import argparse
+import collections
 import datetime
 import json
 import os
@@ -43,6 +45,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
+from taichi_spheres.simulation import DEFAULT_STEP_FRACTION  # noqa: E402
 from machine import cpu_name, publish, untimed_pass  # noqa: E402  (tools/machine.py)
 
 G = 9.81
@@ -96,22 +99,45 @@ def pour(scene_path, t1, t2):
                 at_t1=at_t1, scene=scene)
 
 
-def bed_with_caps(p, caps):
-    """The pour's bed phase again from its t1 checkpoint with each (velocity, position)
-    sweep cap, Rules.shock_propagation and Rules.relaxation: wall s per simulated s,
-    overlap and kinetic energy at t2."""
+#: one row of the error-against-run-time table: sweep caps, Rules.shock_propagation,
+#: Rules.relaxation and the step fraction the bed phase runs with
+Variant = collections.namedtuple("Variant", "vel pos shock omega step_fraction",
+                                 defaults=("auto", 1.0, DEFAULT_STEP_FRACTION))
+
+
+def stepped_energy_growth(sim, t_end) -> float:
+    """Advance to t_end with advance_to's steps, one at a time; returns the largest
+    growth of the total energy (kinetic + potential) in one step [J] (0 if it never
+    grew)."""
+    worst, last = 0.0, sim.energy_budget()["current"]
+    while sim.time < t_end:
+        h = sim.max_step()
+        final = h >= t_end - sim.time
+        sim.step(t_end - sim.time if final else h)
+        sim.time = t_end if final else sim.time + h
+        now = sim.energy_budget()["current"]
+        worst, last = max(worst, now - last), now
+    return worst
+
+
+def bed_with_caps(p, variants):
+    """The pour's bed phase again from its t1 state for each Variant: wall s per
+    simulated s, overlap and kinetic energy at t2, and the largest one-step energy
+    growth (measured in the untimed pass that precedes the timed one; the same steps).
+    A Variant with another step fraction continues the t1 state under that bound."""
     out = {}
-    for vel, pos, shock, omega in caps:
-        tuning = Tuning().with_(contact_iterations=vel, position_iterations=pos,
-                                shock_propagation=shock, relaxation=omega)
-        sim = ts.Simulation(p["scene"], tuning=tuning)
-        sim.restore(p["at_t1"])
-        untimed_pass(sim, lambda s: s.advance_to(p["t2"]))
-        wall, _ = window(sim, p["t2"])
+    for var in variants:
+        tuning = Tuning().with_(contact_iterations=var.vel, position_iterations=var.pos,
+                                shock_propagation=var.shock, relaxation=var.omega)
+        sim = ts.Simulation(p["scene"], tuning=tuning, step_fraction=var.step_fraction)
+        sim.restore(dict(p["at_t1"], step_fraction=var.step_fraction))
+        growth = {}
+        untimed_pass(sim, lambda s: growth.setdefault("J", stepped_energy_growth(s, p["t2"])))
+        wall, c = window(sim, p["t2"])
         st = sim.state()
-        out[(vel, pos, shock, omega)] = dict(wall=wall / (p["t2"] - p["t1"]),
-                                             overlap=max_overlap(st, p["scene"]),
-                                             ke=ts.observe.kinetic_energy(st))
+        out[var] = dict(wall=wall / (p["t2"] - p["t1"]), overlap=max_overlap(st, p["scene"]),
+                        ke=ts.observe.kinetic_energy(st), growth=growth["J"] / sim.initial_energy,
+                        sweeps=c["contact_iterations"] / max(c["contact_steps"], 1))
     return out
 
 
@@ -202,14 +228,19 @@ def report(args, p, cols, warm, beds, capped) -> str:
               f"step with it, {warm[False]:.1f} without.", "",
               f"Error against run time, the pour's bed phase again from its t = {p['t1']:g} s "
               "state with other sweep caps (Rules.contact_iterations, position_iterations), "
-              "shock propagation or over-relaxation (Rules.relaxation):",
+              "shock propagation, over-relaxation (Rules.relaxation) or a longer step bound "
+              "(step_fraction):",
               "", "| velocity / position sweeps at most | wall s per simulated s | overlap / "
-              f"diameter at {p['t2']:g} s | kinetic energy at {p['t2']:g} s [J] |",
-              "|---|---|---|---|"]
-    for (vel, pos, shock, omega), c in capped.items():
-        lines.append(f"| {vel} / {pos}{', shock propagation on' if shock == 'on' else ''}"
-                     f"{f', relaxation {omega:g}' if omega != 1.0 else ''} | "
-                     f"{c['wall']:.2f} | {c['overlap']:.2e} | {c['ke']:.2e} |")
+              f"diameter at {p['t2']:g} s | kinetic energy at {p['t2']:g} s [J] | largest "
+              "energy growth in one step / initial energy |",
+              "|---|---|---|---|---|"]
+    for var, c in capped.items():
+        extra = (", shock propagation on" if var.shock == "on" else "") + \
+            (f", relaxation {var.omega:g}" if var.omega != 1.0 else "") + \
+            (f", step fraction {var.step_fraction:g}"
+             if var.step_fraction != DEFAULT_STEP_FRACTION else "")
+        lines.append(f"| {var.vel} / {var.pos}{extra} | {c['wall']:.2f} | {c['overlap']:.2e} | "
+                     f"{c['ke']:.2e} | {c['growth']:.1e} |")
     lines.append("")
     if beds:
         lines += [f"FCC bed: a flat lattice block (10 sphere layers, r = 0.01 m) in a box that "
@@ -251,10 +282,12 @@ def main(argv=None):
             "upper half 10^3 x heavier": column(1e3, 3.0),
             "upper half 10^3 x heavier, shock propagation off": column(1e3, 3.0, shock="off")}
     warm = {w: column(1.0, 3.0, warm_start=w)["sweeps"] for w in (True, False)}
-    capped = bed_with_caps(p, [(10, 10, "auto", 1.0), (30, 30, "auto", 1.0),
-                               (100, 100, "auto", 1.0), (300, 300, "auto", 1.0),
-                               (30, 30, "on", 1.0), (100, 100, "on", 1.0),
-                               (30, 30, "auto", 1.5), (100, 100, "auto", 1.5)])
+    V = Variant
+    capped = bed_with_caps(p, [V(10, 10), V(30, 30), V(100, 100), V(300, 300),
+                               V(30, 30, "on"), V(100, 100, "on"),
+                               V(30, 30, omega=1.5), V(100, 100, omega=1.5),
+                               V(70, 70, omega=1.8), V(100, 100, omega=1.8),
+                               V(80, 80, omega=1.8, step_fraction=0.25)])
     beds = {(t, shock): bed(args.bed_n, args.bed_time, t, shock)
             for shock in ("auto", "on") for t in (1, 2)}
     publish(report(args, p, cols, warm, beds, capped), "contact-solver",
