@@ -233,14 +233,21 @@ class Grid(CellArithmetic):
         return [int(self.scan_size[k]) for k in range(len(self.scan_capacity))]
 
     # ---- build ----
+    def scan_buffers(self, first):
+        """Level buffers for :meth:`exclusive_scan` of ``first`` (an i32 field of at least
+        cell_capacity items): ``first``, then new fields for the block sums."""
+        return [first] + [ti.field(ti.i32, shape=size) for size in self.scan_capacity[1:]]
+
     @ti.func
-    def _exclusive_scan(self):
-        """In-place exclusive prefix sum of start[0:M] (blocked, every arch)."""
+    def exclusive_scan(self, bufs: ti.template()):
+        """In-place exclusive prefix sum of bufs[0][0:M] (blocked, parallel on every arch;
+        ``bufs`` from :meth:`scan_buffers`; the grid's own is ``scan_bufs``, over
+        ``start``)."""
         B = ti.static(self.scan_block)
         levels = ti.static(len(self.scan_capacity))
         for lv in ti.static(range(levels - 1)):
-            buf = ti.static(self.scan_bufs[lv])
-            nxt = ti.static(self.scan_bufs[lv + 1])
+            buf = ti.static(bufs[lv])
+            nxt = ti.static(bufs[lv + 1])
             size = self.scan_size[lv]
             ti.loop_config(serialize=ti.static(self.serial_light or self.scan_capacity[lv + 1] < 8))
             for b in range(self.scan_size[lv + 1]):
@@ -252,7 +259,7 @@ class Grid(CellArithmetic):
                         buf[idx] = acc
                         acc += t
                 nxt[b] = acc
-        top = ti.static(self.scan_bufs[levels - 1])
+        top = ti.static(bufs[levels - 1])
         ti.loop_config(serialize=True)
         for _ in range(1):
             acc = 0
@@ -261,8 +268,8 @@ class Grid(CellArithmetic):
                 top[k] = acc
                 acc += t
         for lv in ti.static(range(levels - 2, -1, -1)):
-            buf = ti.static(self.scan_bufs[lv])
-            nxt = ti.static(self.scan_bufs[lv + 1])
+            buf = ti.static(bufs[lv])
+            nxt = ti.static(bufs[lv + 1])
             ti.loop_config(serialize=ti.static(self.serial_light))
             for idx in range(self.scan_size[lv]):
                 buf[idx] += nxt[idx // B]
@@ -286,7 +293,7 @@ class Grid(CellArithmetic):
             self.cell_of[i] = k
             ti.atomic_add(self.start[k], 1)
             self.state.moved[i] = 0
-        self._exclusive_scan()
+        self.exclusive_scan(self.scan_bufs)
         ti.loop_config(serialize=ti.static(self.serial_light))
         for c in range(m):
             self.cursor[c] = self.start[c]

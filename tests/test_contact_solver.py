@@ -354,3 +354,45 @@ def test_heavy_ball_dropped_onto_a_settled_bed(arch, shock):
     assert st.x[:, 2].min() >= R * (1 - 1e-4)
     assert np.abs(st.v).max() <= 1e-3
     assert sim.stats["pair_collisions"] > 0 and sim.stats["contacts"] > 0
+
+
+def _periodic_layer_scene():
+    """Three touching layers of 3 x 3 spheres on the floor of a box periodic on x and
+    y, 3 grid cells wide on each (the grid's only odd periodic count: 3 colours)."""
+    side = 0.08
+    g = (np.arange(3) + 0.5) * side / 3
+    xy = np.array(np.meshgrid(g, g, indexing="ij")).reshape(2, -1).T
+    x = np.vstack([np.c_[xy, np.full(len(xy), R + (2 * R + 1e-6) * z)] for z in range(3)])
+    return ts.Scene.from_arrays(x, np.zeros_like(x), np.full(len(x), R),
+                                box=((0, 0, 0), (side, side, 0.2)),
+                                periodic=(True, True, False), gravity=(0, 0, -G),
+                                restitution=0.5)
+
+
+@pytest.mark.parametrize("parallel", [False, True])
+def test_active_cells_list_each_row_owner_once_under_its_colour(arch, parallel):
+    """pgs.list_active_cells (parallel count and placement) lists every cell that owns
+    rows exactly once, under the colour GridGeometry.colours gives it, with odd cell
+    counts on periodic axes (a third colour there); the serial path in linear order."""
+    below = 0 if parallel else 3000
+    sim = ts.Simulation(_periodic_layer_scene(), arch=arch, tuning=Tuning().with_(
+        serial_heavy_below=below, serial_solver_below=below))
+    sim.advance(sim.max_step())
+    parts = sim.debug_view()
+    solver, geom = parts.solver, parts.grid.geom
+    start = solver.cell_start.to_numpy()[:geom.n_cells + 1]
+    owners = set(np.flatnonzero(np.diff(start) > 0).tolist())
+    assert len(owners) >= 9
+    assert len(geom.axis_colours(0)) == len(geom.axis_colours(1)) == 3   # odd, periodic
+    listed = solver.active_cells.to_numpy()
+    bounds = solver.colour_active.to_numpy()
+    seen = []
+    for colour, spec in enumerate(geom.colours):
+        cells = listed[bounds[colour]:bounds[colour + 1]].tolist()
+        members = {(c[0] * geom.dims[1] + c[1]) * geom.dims[2] + c[2]
+                   for c in geom.colour_cells(spec)}
+        assert set(cells) <= members, f"colour {colour} lists a cell of another colour"
+        if not parallel:
+            assert cells == sorted(cells)
+        seen += cells
+    assert sorted(seen) == sorted(owners)

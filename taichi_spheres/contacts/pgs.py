@@ -10,6 +10,8 @@ A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 
 import taichi as ti
 
+from .sweeps import MAX_COLOURS
+
 #: modes of one sweep over the rows: apply the warm-start impulses, a velocity update,
 #: a position (pseudo-velocity) update
 WARM, VELOCITY, POSITION = 0, 1, 2
@@ -92,28 +94,49 @@ class GaussSeidel:
             self.sweep_cell(self.active_cells[t], mode)
 
     @ti.func
+    def colour_of(self, k):
+        """Colour of cell k: its index in GridGeometry.colours, the product of the axes'
+        colours (GridGeometry.axis_colours: the cell's parity, or the last colour for
+        the odd last cell of a periodic axis)."""
+        c = self.grid.coords(k)
+        out = 0
+        for a in ti.static(range(3)):
+            n = self.grid.dims[None][a]
+            axis = c[a] % 2
+            if ti.static(self.grid.periodic[a]):
+                if n % 2 == 1 and c[a] == n - 1:
+                    axis = 2
+            out = out * self.axis_colour_count[a] + axis
+        return out
+
+    @ti.func
     def list_active_cells(self):
-        """active_cells: the cells of each colour that own rows, in the order the colour
-        table walks them (x slowest, z fastest); colour c's cells are
-        active_cells[colour_active[c]:colour_active[c + 1]]. Kernel top level, serial:
-        O(cells) once per step, so that the sweeps visit only these cells."""
-        total = 0
+        """active_cells: the cells of each colour that own rows; colour c's cells are
+        active_cells[colour_active[c]:colour_active[c + 1]] (kernel top level). A count
+        per colour, its prefix (a few colours) and a placement, each cell in parallel:
+        the order of the cells inside one colour does not change the sweeps' bits
+        (their blocks are disjoint); serially it is the cells' linear order."""
         ti.loop_config(serialize=True)
-        for colour in range(self.n_colours_f[None]):
-            self.colour_active[colour] = total
-            sx = self.colour_table[colour, 0]
-            sy = self.colour_table[colour, 1]
-            sz = self.colour_table[colour, 2]
-            for t in range(sx[2] * sy[2] * sz[2]):
-                iz = t % sz[2]
-                iy = (t // sz[2]) % sy[2]
-                ix = t // (sz[2] * sy[2])
-                c = ti.Vector([sx[0] + sx[1] * ix, sy[0] + sy[1] * iy, sz[0] + sz[1] * iz])
-                k = self.grid.linear(c)
-                if ti.min(self.cell_start[k + 1], ti.static(self.capacity)) > self.cell_start[k]:
-                    self.active_cells[total] = k
-                    total += 1
-        self.colour_active[self.n_colours_f[None]] = total
+        for colour in range(ti.static(MAX_COLOURS)):
+            self.colour_fill[colour] = 0
+        ti.loop_config(serialize=ti.static(self.serial))
+        for k in range(self.grid.n_cells[None]):
+            if ti.min(self.cell_start[k + 1], ti.static(self.capacity)) > self.cell_start[k]:
+                ti.atomic_add(self.colour_fill[self.colour_of(k)], 1)
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            total = 0
+            for colour in range(self.n_colours_f[None]):
+                self.colour_active[colour] = total
+                total += self.colour_fill[colour]
+                self.colour_fill[colour] = 0
+            self.colour_active[self.n_colours_f[None]] = total
+        ti.loop_config(serialize=ti.static(self.serial))
+        for k in range(self.grid.n_cells[None]):
+            if ti.min(self.cell_start[k + 1], ti.static(self.capacity)) > self.cell_start[k]:
+                colour = self.colour_of(k)
+                self.active_cells[self.colour_active[colour] +
+                                  ti.atomic_add(self.colour_fill[colour], 1)] = k
 
     @ti.func
     def set_tolerances(self):

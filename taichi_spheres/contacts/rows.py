@@ -136,13 +136,15 @@ class ContactRows:
 
     @ti.func
     def scan_cells(self):
-        """cell_start = exclusive prefix sum of cell_count; n_rows (serial: O(cells))."""
-        total = 0
-        ti.loop_config(serialize=True)
-        for k in range(self.grid.n_cells[None]):
-            self.cell_start[k] = total
-            total += self.cell_count[k]
-        self.cell_start[self.grid.n_cells[None]] = total
+        """cell_start = exclusive prefix sum of cell_count; n_rows (the grid's blocked
+        scan: parallel on every arch)."""
+        m = self.grid.n_cells[None]
+        ti.loop_config(serialize=ti.static(self.serial))
+        for k in range(m):
+            self.cell_start[k] = self.cell_count[k]
+        self.grid.exclusive_scan(self.scan_bufs)
+        total = self.cell_start[m - 1] + self.cell_count[m - 1]
+        self.cell_start[m] = total
         self.n_rows[None] = total
 
     @ti.func

@@ -84,7 +84,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
             warm_t, warm_r: (N, warm_slots) vec3 — lam_t and lam_r of those rows
         colour_table: (MAX_COLOURS, 3) vec3 i32 — (start, stride, count) per axis
         active_cells: (M,) i32, colour_active: (MAX_COLOURS + 1,) i32 — the cells that
-            own rows, colour by colour (pgs.list_active_cells)
+            own rows, colour by colour (pgs.list_active_cells); colour_fill:
+            (MAX_COLOURS,) i32 its counts; axis_colour_count: (3,) i32 colours per axis
+        scan_bufs: the block sums of the scan of cell_start (grid.scan_buffers)
     """
 
     def __init__(self, state: SphereState, grid: Grid, params: StepParams, pairs,
@@ -132,6 +134,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         self.colour_table = ti.Vector.field(3, ti.i32, shape=(MAX_COLOURS, 3))
         self.active_cells = ti.field(ti.i32, shape=cells)
         self.colour_active = ti.field(ti.i32, shape=MAX_COLOURS + 1)
+        self.colour_fill = ti.field(ti.i32, shape=MAX_COLOURS)
+        self.axis_colour_count = ti.field(ti.i32, shape=3)
+        self.scan_bufs = self.grid.scan_buffers(self.cell_start)
         self.n_colours = 0
         self.margin = ti.field(real, shape=())       # speculative margin [m]
         self.h_prev = ti.field(real, shape=())       # length of the last solved step [s]
@@ -153,6 +158,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         self.colour_table.from_numpy(table)
         self.n_colours = len(colours)
         self.n_colours_f[None] = len(colours)
+        for a in range(3):
+            self.axis_colour_count[a] = len(geom.axis_colours(a))
         # a tenth of the overlap tolerance of the smallest contact distance [m]
         self.tol_len[None] = 0.1 * self.rules.overlap_tolerance * 2.0 * float(scene.radius.min())
         self.margin[None] = geom.slack if reach is None else min(geom.slack, reach)
