@@ -10,7 +10,9 @@ them, the warm-started impulses and the velocities after the warm start. Then, i
 numpy:
 
 - projected Gauss-Seidel exactly as contacts/pgs.py updates a row (checked: its
-  velocities after the engine's own sweeps match the engine's to round-off);
+  velocities after the engine's own sweeps match the engine's to round-off), also
+  over-relaxed (Rules.relaxation 1.5 and 1.8) and in other row orders (by height from
+  the floor up or from the top down, and symmetric forward-backward sweeps);
 - APGD, Nesterov-accelerated projected gradient descent with adaptive restart and
   backtracking (Mazhar, Heyn, Negrut, Tasora 2015, "Using Nesterov's method to
   accelerate multibody dynamics with friction and contact", ACM TOG 34(3)), from the
@@ -69,6 +71,7 @@ def capture(scene_path: str, at: float) -> dict:
                            b=solver.row_b.to_numpy()[:n], normal=solver.normal.to_numpy()[:n],
                            meff=solver.meff.to_numpy()[:n], target=solver.target.to_numpy()[:n],
                            lam=solver.lam.to_numpy()[:n], v=solver.state.v.to_numpy()[:k],
+                           x=solver.state.x.to_numpy()[:k],
                            inv_mass=1.0 / np.asarray(scene.mass, dtype=np.float64),
                            h=float(solver.params.h[None]), sweeps=cap)
         done = inner(mode, cap, tol)
@@ -127,21 +130,19 @@ class Problem:
         return float(np.max(np.abs(lam - np.maximum(lam - g, 0.0))))
 
 
-def pgs(prob: Problem, sweeps: list[int]) -> dict:
-    """contacts/pgs.py's velocity sweeps in the engine's row order; velocities after
-    each requested number of sweeps."""
+def pgs(prob: Problem, sweeps: list[int], omega: float = 1.0, orders=None) -> dict:
+    """contacts/pgs.py's velocity sweeps (over-relaxation ``omega``, Rules.relaxation),
+    sweep k visiting the rows in ``orders[k % len(orders)]`` (default: the engine's
+    order); velocities after each requested number of sweeps."""
     p = prob.p
-    order = p["order"]
-    a, b, n, meff, tgt = (p[k][order] for k in ("a", "b", "normal", "meff", "target"))
-    lam = p["lam"][order].copy()
-    v = p["v"].copy()
+    orders = [p["order"]] if orders is None else orders
+    a, b, n, meff, tgt = (p[k].tolist() for k in ("a", "b", "normal", "meff", "target"))
+    lam_l = p["lam"].tolist()
     im = prob.im
-    a, b, meff, tgt, lam_l = a.tolist(), b.tolist(), meff.tolist(), tgt.tolist(), lam.tolist()
-    n = n.tolist()
-    vl = v.tolist()
+    vl = p["v"].tolist()
     out = {}
     for k in range(1, max(sweeps) + 1):
-        for s in range(len(a)):
+        for s in orders[(k - 1) % len(orders)].tolist():
             ai, bi, ns = a[s], b[s], n[s]
             va = vl[ai]
             if bi >= 0:
@@ -150,7 +151,7 @@ def pgs(prob: Problem, sweeps: list[int]) -> dict:
             else:
                 un = va[0] * ns[0] + va[1] * ns[1] + va[2] * ns[2]
             old = lam_l[s]
-            new = max(old + meff[s] * (tgt[s] - un), 0.0)
+            new = max(old + omega * meff[s] * (tgt[s] - un), 0.0)
             lam_l[s] = new
             dl = new - old
             ca = dl * im[ai]
@@ -162,6 +163,16 @@ def pgs(prob: Problem, sweeps: list[int]) -> dict:
         if k in sweeps:
             out[k] = np.array(vl)
     return out
+
+
+def sweep_orders(p) -> dict:
+    """Other row orders for the same sweeps: by the height of the contact point from
+    the floor up, from the top down, and symmetric (the engine's order, then reversed)."""
+    r = 0.5 * p["d"]
+    height = p["x"][p["a"], 2] - r * p["normal"][:, 2]
+    up = np.argsort(height, kind="stable")
+    return {"rows from the floor up": [up], "rows from the top down": [up[::-1]],
+            "symmetric (forward, then backward)": [p["order"], p["order"][::-1]]}
 
 
 def apgd(prob: Problem, iterations: int, keep=()) -> tuple:
@@ -202,7 +213,7 @@ def errors(v, truth, h, d) -> dict:
     return dict(max=float(e.max()), rms=float(np.sqrt(np.mean(e * e))), overlap=float(e.max() * h / d))
 
 
-def report(args, p, res_true, pgs_rows, apgd_rows, check) -> str:
+def report(args, p, res_true, pgs_rows, apgd_rows, check, variant_rows=()) -> str:
     lines = [f"Measured {datetime.date.today()} on {cpu_name()}: "
              f"`python tools/solver_convergence.py{' --at ' + str(args.at) if args.at != 1.0 else ''}`",
              "",
@@ -216,6 +227,8 @@ def report(args, p, res_true, pgs_rows, apgd_rows, check) -> str:
              "|---|---|---|---|---|"]
     for k, e in pgs_rows:
         lines.append(f"| PGS (the engine's sweeps) | {k} | {e['max']:.1e} | {e['rms']:.1e} | {e['overlap']:.1e} |")
+    for name, k, e in variant_rows:
+        lines.append(f"| PGS, {name} | {k} | {e['max']:.1e} | {e['rms']:.1e} | {e['overlap']:.1e} |")
     for k, (work, e) in apgd_rows:
         lines.append(f"| APGD, {k} iterations | {work} | {e['max']:.1e} | {e['rms']:.1e} | {e['overlap']:.1e} |")
     return "\n".join(lines)
@@ -227,6 +240,10 @@ def main(argv=None):
     ap.add_argument("--at", type=float, default=1.0)
     ap.add_argument("--sweeps", type=int, nargs="+", default=[10, 30, 100, 300, 1000])
     ap.add_argument("--apgd", type=int, nargs="+", default=[50, 100, 200, 500])
+    ap.add_argument("--omega", type=float, nargs="*", default=[1.5, 1.8],
+                    help="over-relaxation factors to compare (Rules.relaxation)")
+    ap.add_argument("--variant-sweeps", type=int, nargs="+", default=[30, 100, 300],
+                    help="sweeps reported for the over-relaxed and reordered variants")
     ap.add_argument("--truth", type=int, default=5000, help="APGD iterations for the converged solution")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args(argv)
@@ -240,9 +257,18 @@ def main(argv=None):
     by_pgs = pgs(prob, sweeps)
     check = float(np.abs(by_pgs[p["engine_sweeps"]] - p["engine_v"]).max())
     pgs_rows = [(k, errors(by_pgs[k], truth, p["h"], p["d"])) for k in sorted(args.sweeps)]
+    variant_rows = []
+    for omega in args.omega:
+        by = pgs(prob, args.variant_sweeps, omega=omega)
+        variant_rows += [(f"over-relaxation {omega:g}", k, errors(by[k], truth, p["h"], p["d"]))
+                         for k in args.variant_sweeps]
+    for name, orders in sweep_orders(p).items():
+        by = pgs(prob, args.variant_sweeps, orders=orders)
+        variant_rows += [(name, k, errors(by[k], truth, p["h"], p["d"]))
+                         for k in args.variant_sweeps]
     _, kept = apgd(prob, max(args.apgd), keep=set(args.apgd))
     apgd_rows = [(k, (kept[k][1], errors(kept[k][0], truth, p["h"], p["d"]))) for k in args.apgd]
-    publish(report(args, p, res_true, pgs_rows, apgd_rows, check),
+    publish(report(args, p, res_true, pgs_rows, apgd_rows, check, variant_rows),
             "solver-convergence", args.write)
 
 
