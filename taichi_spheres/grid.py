@@ -155,7 +155,7 @@ class Grid(CellArithmetic):
         start: (M+1,) i32 — exclusive prefix of cell counts; sphere ids of cell c are
             ``order[start[c]:start[c+1]]``, sorted by id (deterministic on every arch)
         order: (N,) i32 sphere ids by cell;  cell_of: (N,) i32 linear cell of sphere
-        cursor: (M,) i32 scatter cursors;  scan_levels: block sums of the scan
+        cursor: (M,) i32 scatter cursors;  scan_bufs: start and the block sums of its scan
         xs: (N,) vec3 — positions in ``order`` (xs[p] = x[order[p]]) [m], so that a
             neighbour scan walks a row of cells through contiguous memory; slot: (N,)
             i32 — where sphere i sits in ``order``. Whoever moves a sphere after the
@@ -240,9 +240,9 @@ class Grid(CellArithmetic):
 
     @ti.func
     def exclusive_scan(self, bufs: ti.template()):
-        """In-place exclusive prefix sum of bufs[0][0:M] (blocked, parallel on every arch;
-        ``bufs`` from :meth:`scan_buffers`; the grid's own is ``scan_bufs``, over
-        ``start``)."""
+        """In-place exclusive prefix sum of bufs[0][0:M] (blocked: parallel loops on
+        every arch, serial where the grid runs light loops serially; ``bufs`` from
+        :meth:`scan_buffers`; the grid's own is ``scan_bufs``, over ``start``)."""
         B = ti.static(self.scan_block)
         levels = ti.static(len(self.scan_capacity))
         for lv in ti.static(range(levels - 1)):

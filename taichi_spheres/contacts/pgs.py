@@ -95,19 +95,9 @@ class GaussSeidel:
 
     @ti.func
     def colour_of(self, k):
-        """Colour of cell k: its index in GridGeometry.colours, the product of the axes'
-        colours (GridGeometry.axis_colours: the cell's parity, or the last colour for
-        the odd last cell of a periodic axis)."""
-        c = self.grid.coords(k)
-        out = 0
-        for a in ti.static(range(3)):
-            n = self.grid.dims[None][a]
-            axis = c[a] % 2
-            if ti.static(self.grid.periodic[a]):
-                if n % 2 == 1 and c[a] == n - 1:
-                    axis = 2
-            out = out * self.axis_colour_count[a] + axis
-        return out
+        """Colour of cell k, numbered like GridGeometry.colours (the pair rule's
+        Contacts.colour_index of its coordinates)."""
+        return self.pairs.colour_index(self.grid.coords(k))
 
     @ti.func
     def list_active_cells(self):

@@ -137,7 +137,7 @@ class ContactRows:
     @ti.func
     def scan_cells(self):
         """cell_start = exclusive prefix sum of cell_count; n_rows (the grid's blocked
-        scan: parallel on every arch)."""
+        scan, Grid.exclusive_scan)."""
         m = self.grid.n_cells[None]
         ti.loop_config(serialize=ti.static(self.serial))
         for k in range(m):

@@ -41,7 +41,6 @@ smallest diameter), at most ``Rules.contact_iterations`` / ``position_iterations
 A mixin-free class over the engine's state, grid, parameters and pair geometry.
 """
 
-import numpy as np
 import taichi as ti
 
 from ..config import DEFAULT, Tuning
@@ -82,11 +81,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         warm_key, warm_lam: (N, warm_slots) — last step's rows keyed at their sphere
             a: b and lambda; warm_n: (N,) i32 rows kept (more than warm_slots: none);
             warm_t, warm_r: (N, warm_slots) vec3 — lam_t and lam_r of those rows
-        colour_table: (MAX_COLOURS, 3) vec3 i32 — (start, stride, count) per axis
         active_cells: (M,) i32, colour_active: (MAX_COLOURS + 1,) i32 — the cells that
             own rows, colour by colour (pgs.list_active_cells); colour_fill:
-            (MAX_COLOURS,) i32 its counts; axis_colour_count: (3,) i32 colours per axis
-        scan_bufs: the block sums of the scan of cell_start (grid.scan_buffers)
+            (MAX_COLOURS,) i32 its counts
+        scan_bufs: cell_start and the block sums of its scan (grid.scan_buffers)
     """
 
     def __init__(self, state: SphereState, grid: Grid, params: StepParams, pairs,
@@ -131,11 +129,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         self.w_pre = ti.Vector.field(3, real, shape=cap) if friction else None
         self.warm_t = ti.Vector.field(3, real, shape=(cap, slots)) if friction else None
         self.warm_r = ti.Vector.field(3, real, shape=(cap, slots)) if rolling else None
-        self.colour_table = ti.Vector.field(3, ti.i32, shape=(MAX_COLOURS, 3))
         self.active_cells = ti.field(ti.i32, shape=cells)
         self.colour_active = ti.field(ti.i32, shape=MAX_COLOURS + 1)
         self.colour_fill = ti.field(ti.i32, shape=MAX_COLOURS)
-        self.axis_colour_count = ti.field(ti.i32, shape=3)
         self.scan_bufs = self.grid.scan_buffers(self.cell_start)
         self.n_colours = 0
         self.margin = ti.field(real, shape=())       # speculative margin [m]
@@ -152,14 +148,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
     def bind(self, scene, geom, reach=None):
         """Load a scene's grid geometry ``geom`` (colours; the speculative margin: the
         grid's slack, or ``reach`` [m] if smaller) and forget the warm start."""
-        colours = geom.colours
-        table = np.zeros((MAX_COLOURS, 3, 3), dtype=np.int32)
-        table[:len(colours)] = np.array(colours, dtype=np.int32)
-        self.colour_table.from_numpy(table)
-        self.n_colours = len(colours)
-        self.n_colours_f[None] = len(colours)
-        for a in range(3):
-            self.axis_colour_count[a] = len(geom.axis_colours(a))
+        self.n_colours = len(geom.colours)
+        self.n_colours_f[None] = self.n_colours
         # a tenth of the overlap tolerance of the smallest contact distance [m]
         self.tol_len[None] = 0.1 * self.rules.overlap_tolerance * 2.0 * float(scene.radius.min())
         self.margin[None] = geom.slack if reach is None else min(geom.slack, reach)
