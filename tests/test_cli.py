@@ -355,7 +355,12 @@ def test_forced_slow_run_reports_on_sigusr1(tmp_path):
             assert wait_for(err, "status: frame", 120), err.read_text()
         finally:
             proc.send_signal(signal.SIGINT)
-            proc.wait(timeout=120)
+            try:
+                proc.wait(timeout=120)
+            except subprocess.TimeoutExpired:    # fail, but leave no run behind
+                proc.kill()
+                proc.wait()
+                raise
     assert proc.returncode == 130, err.read_text()
 
 

@@ -25,7 +25,8 @@ from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
 
 
 def run_suite() -> tuple:
-    """(pytest's summary line, wall seconds, exit code) of ``make test``."""
+    """(pytest's summary line, wall seconds, exit code) of ``make test``; pytest's
+    FAILED and ERROR lines go to stderr."""
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=cache)
         t0 = time.perf_counter()
@@ -34,6 +35,9 @@ def run_suite() -> tuple:
         seconds = time.perf_counter() - t0
     summary = [line for line in out.stdout.splitlines()
                if re.search(r"\d+ (passed|failed)", line)]
+    for line in out.stdout.splitlines():
+        if line.startswith(("FAILED", "ERROR")):
+            print(line, file=sys.stderr)
     return (summary[-1].strip("= ") if summary else "no summary"), seconds, out.returncode
 
 
