@@ -11,7 +11,7 @@ import pytest
 
 from taichi_spheres.output import CSV_COLUMNS
 
-from ctrl_c import interrupt_after_lines
+from ctrl_c import interrupt_after_lines, start_cli
 
 TINY = """
 name = "tiny"
@@ -345,9 +345,8 @@ def test_forced_slow_run_reports_on_sigusr1(tmp_path):
     name = seed_five(tmp_path, ("gravity = [0.0, 0.0, -9.81]", "gravity = [0.0, 0.0, -1e12]"))
     err = tmp_path / "err.txt"
     with open(err, "w") as fh:
-        proc = subprocess.Popen([sys.executable, "-m", "taichi_spheres.cli", "run", name,
-                                 "--no-video", "--quiet", "--force", "-o", "s.mp4"],
-                                cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=fh)
+        proc = start_cli(["run", name, "--no-video", "--quiet", "--force", "-o", "s.mp4"],
+                         tmp_path, stdout=subprocess.DEVNULL, stderr=fh)
         try:
             assert wait_for(err, "timing:", 300), err.read_text()
             assert "above the limit" in err.read_text()
