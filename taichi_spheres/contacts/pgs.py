@@ -100,6 +100,11 @@ class GaussSeidel:
         return self.pairs.colour_index(self.grid.coords(k))
 
     @ti.func
+    def owns_rows(self, k):
+        """Cell k owns rows within the solver's capacity."""
+        return ti.min(self.cell_start[k + 1], ti.static(self.capacity)) > self.cell_start[k]
+
+    @ti.func
     def list_active_cells(self):
         """active_cells: the cells of each colour that own rows; colour c's cells are
         active_cells[colour_active[c]:colour_active[c + 1]] (kernel top level). A count
@@ -111,7 +116,7 @@ class GaussSeidel:
             self.colour_fill[colour] = 0
         ti.loop_config(serialize=ti.static(self.serial))
         for k in range(self.grid.n_cells[None]):
-            if ti.min(self.cell_start[k + 1], ti.static(self.capacity)) > self.cell_start[k]:
+            if self.owns_rows(k):
                 ti.atomic_add(self.colour_fill[self.colour_of(k)], 1)
         ti.loop_config(serialize=True)
         for _ in range(1):
@@ -123,7 +128,7 @@ class GaussSeidel:
             self.colour_active[self.n_colours_f[None]] = total
         ti.loop_config(serialize=ti.static(self.serial))
         for k in range(self.grid.n_cells[None]):
-            if ti.min(self.cell_start[k + 1], ti.static(self.capacity)) > self.cell_start[k]:
+            if self.owns_rows(k):
                 colour = self.colour_of(k)
                 self.active_cells[self.colour_active[colour] +
                                   ti.atomic_add(self.colour_fill[colour], 1)] = k
