@@ -28,11 +28,18 @@ def interrupt_after_lines(args, cwd, path, lines, timeout=300):
         if path.exists() and len(path.read_text().splitlines()) > lines:
             break
         time.sleep(0.05)
+    _, err = interrupt(proc)
+    return proc.returncode, err
+
+
+def interrupt(proc, timeout=120):
+    """Send ``proc`` SIGINT and wait for it to end (``communicate``: its output); if it
+    has not ended within ``timeout`` s, kill it (no run is left behind) and raise
+    subprocess.TimeoutExpired."""
     proc.send_signal(signal.SIGINT)
     try:
-        _, err = proc.communicate(timeout=120)
-    except subprocess.TimeoutExpired:       # fail, but leave no run behind
+        return proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
         proc.kill()
         proc.communicate()
         raise
-    return proc.returncode, err

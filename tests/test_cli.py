@@ -11,7 +11,7 @@ import pytest
 
 from taichi_spheres.output import CSV_COLUMNS
 
-from ctrl_c import interrupt_after_lines, start_cli
+from ctrl_c import interrupt, interrupt_after_lines, start_cli
 
 TINY = """
 name = "tiny"
@@ -353,13 +353,7 @@ def test_forced_slow_run_reports_on_sigusr1(tmp_path):
             proc.send_signal(signal.SIGUSR1)
             assert wait_for(err, "status: frame", 120), err.read_text()
         finally:
-            proc.send_signal(signal.SIGINT)
-            try:
-                proc.wait(timeout=120)
-            except subprocess.TimeoutExpired:    # fail, but leave no run behind
-                proc.kill()
-                proc.wait()
-                raise
+            interrupt(proc)
     assert proc.returncode == 130, err.read_text()
 
 

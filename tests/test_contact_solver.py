@@ -274,15 +274,19 @@ def test_solver_conserves_momentum_without_walls(arch):
     assert np.allclose(p1, p0, rtol=0, atol=1e-14)
 
 
-def test_serial_and_parallel_solver_give_the_same_bits(arch):
+@pytest.mark.parametrize("case", ["fcc block", "odd periodic colours"])
+def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     """The one-launch serial solver and the per-colour parallel launches (forced with
-    serial_heavy_below = serial_solver_below = 0) give the same state."""
-    scene = _fcc_block(4)
+    serial_heavy_below = serial_solver_below = 0) give the same state: an FCC block in
+    a box, and layers on a grid with a third colour on two periodic axes."""
+    scene, seconds = ((_fcc_block(4), 0.3) if case == "fcc block"
+                      else (_periodic_layer_scene(), 0.2))
     out = []
     for below in (3000, 0):
         sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(
             serial_heavy_below=below, serial_solver_below=below))
-        sim.advance(0.3)
+        sim.advance(seconds)
+        assert sim.stats["contacts"] > 0
         out.append(observe.state_digest(sim.state(), sim.precision))
     assert out[0] == out[1]
 
@@ -389,8 +393,7 @@ def test_active_cells_list_each_row_owner_once_under_its_colour(arch, parallel):
     seen, most = [], 0
     for colour, spec in enumerate(geom.colours):
         cells = listed[bounds[colour]:bounds[colour + 1]].tolist()
-        members = {(c[0] * geom.dims[1] + c[1]) * geom.dims[2] + c[2]
-                   for c in geom.colour_cells(spec)}
+        members = {int(np.ravel_multi_index(c, geom.dims)) for c in geom.colour_cells(spec)}
         assert set(cells) <= members, f"colour {colour} lists a cell of another colour"
         if solver.serial:
             assert cells == sorted(cells)
@@ -398,16 +401,3 @@ def test_active_cells_list_each_row_owner_once_under_its_colour(arch, parallel):
         most = max(most, len(cells))
     assert most >= 2
     assert sorted(seen) == sorted(owners)
-
-
-def test_periodic_odd_colours_same_bits_serial_and_parallel(arch):
-    """The one-launch serial solver and the per-colour parallel launches give the same
-    state on a grid with a third colour on two periodic axes."""
-    out = []
-    for below in (3000, 0):
-        sim = ts.Simulation(_periodic_layer_scene(), arch=arch, tuning=Tuning().with_(
-            serial_heavy_below=below, serial_solver_below=below))
-        sim.advance(0.2)
-        assert sim.stats["contacts"] > 0
-        out.append(observe.state_digest(sim.state(), sim.precision))
-    assert out[0] == out[1]

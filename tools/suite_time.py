@@ -13,7 +13,6 @@ import datetime
 import os
 import platform
 import re
-import signal
 import subprocess
 import sys
 import tempfile
@@ -28,9 +27,6 @@ from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
 def run_suite() -> tuple:
     """(pytest's summary line, wall seconds, exit code) of ``make test``; pytest's
     FAILED and ERROR lines go to stderr."""
-    # Ctrl-C at its default in the suite (a shell starts background jobs with SIGINT
-    # ignored, and the interrupt tests would inherit that)
-    signal.signal(signal.SIGINT, signal.default_int_handler)
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=cache)
         t0 = time.perf_counter()
