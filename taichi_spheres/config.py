@@ -42,7 +42,14 @@ class Rules:
         from zero; for measuring what warm starting saves).
     position_iterations: pseudo-velocity (split impulse) sweeps per step at most.
     relaxation: over-relaxation factor omega of the Gauss-Seidel updates (1: plain
-        projected Gauss-Seidel; 1 < omega < 2 converges faster on stacks).
+        projected Gauss-Seidel; 1 < omega < 2 converges faster on stacks). Over-relaxed
+        sweeps overshoot: a solve counts as converged only once a plain sweep leaves
+        every row within tolerance, and a solve stopped at its cap ends with plain
+        sweeps.
+    plain_sweeps: with relaxation != 1, the last sweeps of the cap (velocity and
+        position) that run plain (omega = 1), so that a solve stopped at its cap does
+        not keep the overshoot (a column of light spheres under heavy ones flies apart
+        without them).
     overlap_tolerance: relative overlap the split impulse aims below (a tenth of it
         of the smallest diameter per sweep), and above which the projection pushes
         apart the overlaps left when a step without a contact solver hit the sweep
@@ -69,6 +76,7 @@ class Rules:
     contact_iterations: int = 100
     warm_start: bool = True
     relaxation: float = 1.0
+    plain_sweeps: int = 10
     position_iterations: int = 100
     overlap_tolerance: float = 1e-4
     shock_propagation: str = "auto"

@@ -144,6 +144,28 @@ def test_heavy_on_light_column_holds(arch, precision):
     assert _overlap(st, scene) <= 1e-4
 
 
+def test_over_relaxed_sweeps_hold_the_heavy_on_light_column(arch, precision):
+    """Over-relaxation 1.8 (Rules.relaxation) on the column whose upper half is 10^3 x
+    heavier: a solve stopped at its cap ends with plain sweeps (Rules.plain_sweeps) and
+    counts as converged only after a plain sweep, so the overshoot of the relaxed ones
+    is not kept: the column settles as with plain sweeps, and without those last plain
+    sweeps it does not (the relaxed overshoot launches the light spheres)."""
+    scene = _heavy_on_light()
+    worst = {}
+    for plain in (10, 0):
+        sim = ts.Simulation(scene, arch=arch, precision=precision,
+                            tuning=Tuning().with_(relaxation=1.8, plain_sweeps=plain))
+        e = _energies_by_step(sim, 100)
+        sim.advance(2.0)
+        st = sim.state()
+        worst[plain] = _overlap(st, scene)
+        if plain:
+            assert e.max() <= e[0] * (1 + 1e-12)
+            assert np.abs(st.v).max() <= _speed_floor(precision)
+    assert worst[10] <= 1e-4
+    assert not worst[0] <= 1e-2
+
+
 def test_shock_propagation_changes_nothing_where_the_sweeps_converge(arch):
     """A settled column of 20 (warm-started: one sweep per step leaves every row within
     tolerance): 0.5 s more from its checkpoint gives the same bits with and without
@@ -274,17 +296,20 @@ def test_solver_conserves_momentum_without_walls(arch):
     assert np.allclose(p1, p0, rtol=0, atol=1e-14)
 
 
-@pytest.mark.parametrize("case", ["fcc block", "odd periodic colours"])
+@pytest.mark.parametrize("case", ["fcc block", "odd periodic colours",
+                                  "fcc block, relaxation 1.8"])
 def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     """The one-launch serial solver and the per-colour parallel launches (forced with
     serial_heavy_below = serial_solver_below = 0) give the same state: an FCC block in
-    a box, and layers on a grid with a third colour on two periodic axes."""
-    scene, seconds = ((_fcc_block(4), 0.3) if case == "fcc block"
-                      else (_periodic_layer_scene(), 0.2))
+    a box, and layers on a grid with a third colour on two periodic axes; over-relaxed
+    sweeps with their plain last sweeps the same way in both paths."""
+    scene, seconds = ((_periodic_layer_scene(), 0.2) if case == "odd periodic colours"
+                      else (_fcc_block(4), 0.3))
+    omega = 1.8 if "relaxation" in case else 1.0
     out = []
     for below in (3000, 0):
         sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(
-            serial_heavy_below=below, serial_solver_below=below))
+            serial_heavy_below=below, serial_solver_below=below, relaxation=omega))
         sim.advance(seconds)
         assert sim.stats["contacts"] > 0
         out.append(observe.state_digest(sim.state(), sim.precision))

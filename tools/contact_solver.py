@@ -10,11 +10,15 @@ columns, warm starting, and a large lattice bed held on 1 and 2 threads.
   sweeps per step, the largest residual in the bed phase;
 - column: 20 equal spheres, and 20 with the upper half 10 and 10^3 times heavier, settling
   on the floor for 3 s: largest speed, overlap, sweeps per step at the end (the 10^3
-  column also with Rules.shock_propagation off: unequal masses have it by default);
+  column also with Rules.shock_propagation off: unequal masses have it by default, and
+  with Rules.relaxation 1.8);
 - warm start: the settled column's velocity sweeps per step with and without it;
+- heavy ball: a ball 8 x heavier dropped onto a settled FCC block, the largest growth
+  of the total energy in one step, at relaxation 1 and 1.8;
 - error against run time: the pour's bed phase again from its state at t1 with
   velocity/position sweep caps 10, 30, 100 and 300, and 30 and 100 with shock
   propagation on (equal masses: off by default), with over-relaxation 1.5 and 1.8
+  (from 40 to 100 sweeps)
   (Rules.relaxation; 1 by default), and at step fraction 0.25 (default 0.1), each
   with the largest growth of the total energy in one step;
 - bed: a flat FCC lattice block of --bed-n spheres (10 sphere layers) resting in a
@@ -140,9 +144,9 @@ def bed_with_caps(p, variants):
     return out
 
 
-def column(ratio: float, seconds: float, warm_start=True, shock="auto"):
+def column(ratio: float, seconds: float, warm_start=True, shock="auto", omega=1.0):
     """20 spheres r = 0.01 m on the floor, gaps 1e-4 m; the upper half ``ratio`` x
-    heavier (``shock``: Rules.shock_propagation)."""
+    heavier (``shock``: Rules.shock_propagation, ``omega``: Rules.relaxation)."""
     n, r = 20, 0.01
     x = np.zeros((n, 3))
     x[:, :2] = 0.05
@@ -153,13 +157,39 @@ def column(ratio: float, seconds: float, warm_start=True, shock="auto"):
                                  box=((0, 0, 0), (0.1, 0.1, 0.6)), gravity=(0, 0, -G),
                                  restitution=0.5, wall_restitution=0.5)
     sim = ts.Simulation(scene, tuning=Tuning().with_(warm_start=warm_start,
-                                                     shock_propagation=shock))
+                                                     shock_propagation=shock, relaxation=omega))
     sim.advance(seconds - 0.5)
     _, c = window(sim, seconds)
     st = sim.state()
     return dict(vmax=float(np.abs(st.v).max()), overlap=max_overlap(st, scene),
                 sweeps=c["contact_iterations"] / max(c["contact_steps"], 1),
                 positions=c["position_iterations"] / max(c["contact_steps"], 1))
+
+
+def heavy_ball(omega: float, steps: int = 200) -> dict:
+    """A 256-sphere FCC block (r = 0.01 m, e = 0.5) settled 1 s, then a ball 8 x heavier
+    dropped on it at 1 m/s from 0.05 m above (unequal masses: shock propagation on);
+    Rules.relaxation ``omega``: the largest growth of the total energy in one of the
+    next ``steps`` steps [J], and the total energy when the ball is dropped [J]."""
+    tuning = Tuning().with_(relaxation=omega)
+    block = fcc_bed(256, layers=4)
+    sim = ts.Simulation(block, tuning=tuning)
+    sim.advance(1.0)
+    st = sim.state()
+    ball = [[st.x[:, 0].mean(), st.x[:, 1].mean(), st.x[:, 2].max() + 0.05]]
+    start = [[ball[0][0], ball[0][1], block.x[:, 2].max() + 0.05]]
+    mass = np.append(st.mass, 8 * st.mass[0])
+    scene = ts.Scene.from_arrays(np.vstack([block.x, start]), np.zeros((len(mass), 3)),
+                                 np.full(len(mass), 0.01), mass=mass,
+                                 box=(block.box_lo, block.box_hi), gravity=(0, 0, -G),
+                                 restitution=0.5, wall_restitution=0.5)
+    sim = ts.Simulation(scene, tuning=tuning)
+    sim.set_state(np.vstack([st.x, ball]), np.vstack([st.v, [[0.0, 0.0, -1.0]]]))
+    energy = [sim.energy_budget()["current"]]
+    for _ in range(steps):
+        sim.advance(sim.max_step())
+        energy.append(sim.energy_budget()["current"])
+    return dict(growth=max(float(np.diff(energy).max()), 0.0), energy=energy[0])
 
 
 def fcc_bed(n_target: int, layers: int = 5):
@@ -201,7 +231,7 @@ def bed(n_target, hold, threads, shock="auto"):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def report(args, p, cols, warm, beds, capped) -> str:
+def report(args, p, cols, warm, beds, capped, balls) -> str:
     """The markdown section."""
     cb = p["c_bed"]
     steps = max(cb["contact_steps"], 1)
@@ -225,6 +255,10 @@ def report(args, p, cols, warm, beds, capped) -> str:
                      f"{c['positions']:.1f} |")
     lines += ["", f"Warm start, settled column of 20: {warm[True]:.1f} velocity sweeps per "
               f"step with it, {warm[False]:.1f} without.", "",
+              "A ball 8 x heavier dropped at 1 m/s onto a settled FCC block of 256 spheres, "
+              "largest growth of the total energy in one of the next 200 steps: " +
+              "; ".join(f"relaxation {o:g}: {b['growth']:.2e} J ({b['growth'] / b['energy']:.1e} "
+                        "of the total)" for o, b in balls.items()) + ".", "",
               f"Error against run time, the pour's bed phase again from its t = {p['t1']:g} s "
               "state with other sweep caps (Rules.contact_iterations, position_iterations), "
               "shock propagation, over-relaxation (Rules.relaxation) or a longer step bound "
@@ -279,17 +313,20 @@ def main(argv=None):
     p = pour(args.scene, *args.phases)
     cols = {"equal masses": column(1.0, 3.0), "upper half 10 x heavier": column(10.0, 3.0),
             "upper half 10^3 x heavier": column(1e3, 3.0),
-            "upper half 10^3 x heavier, shock propagation off": column(1e3, 3.0, shock="off")}
+            "upper half 10^3 x heavier, shock propagation off": column(1e3, 3.0, shock="off"),
+            "upper half 10^3 x heavier, relaxation 1.8": column(1e3, 3.0, omega=1.8)}
+    balls = {omega: heavy_ball(omega) for omega in (1.0, 1.8)}
     warm = {w: column(1.0, 3.0, warm_start=w)["sweeps"] for w in (True, False)}
     V = Variant
     capped = bed_with_caps(p, [V(10, 10), V(30, 30), V(100, 100), V(300, 300),
                                V(30, 30, "on"), V(100, 100, "on"),
                                V(30, 30, omega=1.5), V(100, 100, omega=1.5),
+                               V(40, 40, omega=1.8), V(50, 50, omega=1.8),
                                V(70, 70, omega=1.8), V(100, 100, omega=1.8),
                                V(80, 80, omega=1.8, step_fraction=0.25)])
     beds = {(t, shock): bed(args.bed_n, args.bed_time, t, shock)
             for shock in ("auto", "on") for t in (1, 2)}
-    publish(report(args, p, cols, warm, beds, capped), "contact-solver",
+    publish(report(args, p, cols, warm, beds, capped, balls), "contact-solver",
             args.write and not args.quick)
     return 0
 

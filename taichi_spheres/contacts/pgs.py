@@ -4,6 +4,9 @@ update per row, cells of one colour in parallel, colours in turn.
 Row update (Catto's sequential impulses, Moreau–Jean): with u_n the row's normal
 relative velocity (separating > 0), lambda = max(lambda + omega m_eff (target - u_n),
 0) and the change applied to both spheres (Rules.relaxation = omega, 1 by default).
+Over-relaxed sweeps (omega != 1) overshoot: a solve stops only after a plain sweep
+(omega = 1) left every row within tolerance, and the last Rules.plain_sweeps sweeps of
+the cap run plain, so a solve stopped at its cap does not keep the overshoot.
 
 A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 """
@@ -40,7 +43,7 @@ class GaussSeidel:
             field[b] = field[b] - impulse * self.inv_mass(b) * n
 
     @ti.func
-    def solve_row(self, s, mode: ti.template()):
+    def solve_row(self, s, mode: ti.template(), omega):
         """Row s in one sweep: WARM applies its warm-start impulse (a pass of its own
         before the iterations, so that every row starts from last step's impulses);
         VELOCITY and POSITION make one projected Gauss-Seidel update (VELOCITY: with
@@ -52,15 +55,15 @@ class GaussSeidel:
             if ti.static(self.f.friction):
                 self.warm_friction(s)
         elif ti.static(mode == POSITION):
-            out = self.update_row(s, self.w, self.mu, self.pos_target)
+            out = self.update_row(s, self.w, self.mu, self.pos_target, omega)
         else:
             if ti.static(self.f.friction):
                 out = self.solve_friction(s)     # friction first, normal last
-            out = ti.max(out, self.update_row(s, self.state.v, self.lam, self.target))
+            out = ti.max(out, self.update_row(s, self.state.v, self.lam, self.target, omega))
         return out
 
     @ti.func
-    def update_row(self, s, field: ti.template(), acc: ti.template(), goal: ti.template()):
+    def update_row(self, s, field: ti.template(), acc: ti.template(), goal: ti.template(), omega):
         """Row s on velocities ``field`` with accumulated impulse ``acc`` and targets
         ``goal``: lambda = max(lambda + m_eff (goal - u_n), 0), applying the change;
         returns |change| / m_eff [m/s]."""
@@ -72,26 +75,26 @@ class GaussSeidel:
             rel = rel - field[b]
         meff = self.meff[s]
         old = acc[s]
-        new = ti.max(old + ti.static(self.rules.relaxation) * meff * (goal[s] - rel.dot(n)), 0)
+        new = ti.max(old + omega * meff * (goal[s] - rel.dot(n)), 0)
         acc[s] = new
         self.push(field, a, b, n, new - old)
         return ti.abs(new - old) / meff
 
     @ti.func
-    def sweep_cell(self, k, mode: ti.template()):
+    def sweep_cell(self, k, mode: ti.template(), omega):
         """Solve cell k's rows in order; the largest change goes to ``residual``."""
         worst = ti.cast(0, self.real)
         for s in range(self.cell_start[k], ti.min(self.cell_start[k + 1], ti.static(self.capacity))):
-            worst = ti.max(worst, self.solve_row(s, mode))
+            worst = ti.max(worst, self.solve_row(s, mode, omega))
         ti.atomic_max(self.residual[None], worst)
 
     @ti.func
-    def sweep_colour(self, colour, mode: ti.template(), serial: ti.template()):
+    def sweep_colour(self, colour, mode: ti.template(), serial: ti.template(), omega):
         """One pass over the cells of one colour that own rows (disjoint blocks: no two
         threads touch a sphere), in list_active_cells order."""
         ti.loop_config(serialize=serial)
         for t in range(self.colour_active[colour], self.colour_active[colour + 1]):
-            self.sweep_cell(self.active_cells[t], mode)
+            self.sweep_cell(self.active_cells[t], mode, omega)
 
     @ti.func
     def colour_of(self, k):
@@ -143,19 +146,26 @@ class GaussSeidel:
     def warm_start_serially(self):
         """Apply every row's warm-start impulse, colour by colour."""
         for colour in range(self.n_colours_f[None]):
-            self.sweep_colour(colour, WARM, True)
+            self.sweep_colour(colour, WARM, True, 1.0)
 
     @ti.func
     def iterate_serially(self, mode: ti.template(), cap, tol: ti.template()):
-        """Sweeps over every colour until the residual is within tol[None] or cap sweeps
-        ran; returns the sweeps run."""
-        self.residual[None] = 0
-        for colour in range(self.n_colours_f[None]):
-            self.sweep_colour(colour, mode, True)
-        it = 1
-        while self.residual[None] > tol[None] and it < cap:
+        """Sweeps over every colour until a plain sweep (omega 1) leaves the residual
+        within tol[None], or cap sweeps ran; returns the sweeps run."""
+        it = 0
+        relaxed = 1 if ti.static(self.rules.relaxation != 1) else 0
+        done = 0
+        while done == 0:
             self.residual[None] = 0
+            omega = ti.cast(1, self.real)
+            if relaxed == 1 and it < cap - ti.static(self.rules.plain_sweeps):
+                omega = ti.cast(ti.static(self.rules.relaxation), self.real)
             for colour in range(self.n_colours_f[None]):
-                self.sweep_colour(colour, mode, True)
+                self.sweep_colour(colour, mode, True, omega)
             it += 1
+            if not self.residual[None] > tol[None]:
+                done = 1 - relaxed
+                relaxed = 0
+            if it >= cap:
+                done = 1
         return it

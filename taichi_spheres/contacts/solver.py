@@ -278,10 +278,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         # colour's loop a parallel task of its own), and returns the residual
         def sweep_kernel(mode, colours):
             @ti.kernel
-            def sweep() -> real:
+            def sweep(omega: real) -> real:
                 self.residual[None] = 0
                 for colour in ti.static(range(colours)):
-                    self.sweep_colour(colour, mode, False)
+                    self.sweep_colour(colour, mode, False, omega)
                 return self.residual[None]
             return sweep
 
@@ -321,7 +321,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
             return
         self._start()
         if self.rules.warm_start:
-            self._sweep(WARM)()
+            self._sweep(WARM)(1.0)
         iterations = self._iterate(VELOCITY, self.rules.contact_iterations, self.tol_v)
         self.params.contact_residual[None] = self.residual[None]
         self._middle()
@@ -332,12 +332,16 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         """iterate_serially with one launch per sweep (same sweeps, same bits)."""
         limit = tol[None]
         sweep = self._sweep(mode)
+        relaxed = self.rules.relaxation != 1
         it = 0
         while it < cap:
-            residual = sweep()
+            plain = not relaxed or it >= cap - self.rules.plain_sweeps
+            residual = sweep(1.0 if plain else self.rules.relaxation)
             it += 1
             if not residual > limit:
-                break
+                if plain:
+                    break
+                relaxed = False
         return it
 
     def warm_rows(self, n: int) -> dict:
