@@ -156,16 +156,18 @@ class GaussSeidel:
         relaxed = 1 if ti.static(self.rules.relaxation != 1) else 0
         done = 0
         while done == 0:
-            self.residual[None] = 0
+            plain = relaxed == 0 or it >= cap - ti.static(self.rules.plain_sweeps)
             omega = ti.cast(1, self.real)
-            if relaxed == 1 and it < cap - ti.static(self.rules.plain_sweeps):
+            if not plain:
                 omega = ti.cast(ti.static(self.rules.relaxation), self.real)
+            self.residual[None] = 0
             for colour in range(self.n_colours_f[None]):
                 self.sweep_colour(colour, mode, True, omega)
             it += 1
             if not self.residual[None] > tol[None]:
-                done = 1 - relaxed
                 relaxed = 0
+                if plain:
+                    done = 1
             if it >= cap:
                 done = 1
         return it
