@@ -271,8 +271,8 @@ def report(args, p, cols, warm, beds, capped, balls) -> str:
               f"step with it, {warm[False]:.1f} without.", "",
               "A ball 8 x heavier dropped at 1 m/s onto a settled FCC block of 256 spheres: "
               "the largest growth of the total energy in one of the next 200 steps (the "
-              "split impulse lifting spheres out of the overlaps an unconverged solve "
-              "left) is " + "; ".join(f"{b['growth']:.2e} J ({b['growth'] / b['energy']:.1e} "
+              "solver's position moves lifting spheres that its unconverged sweeps left "
+              "sinking into each other) is " + "; ".join(f"{b['growth']:.2e} J ({b['growth'] / b['energy']:.1e} "
                                      f"of the total) with {name}" for name, b in balls.items()) +
               ".", "",
               f"Error against run time, the pour's bed phase again from its t = {p['t1']:g} s "

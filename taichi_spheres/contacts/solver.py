@@ -22,12 +22,14 @@ between the surfaces (< 0: overlap):
   drift moved down by ``g h^2/2`` at speed ``g h``, is put back exactly where it was
   with zero velocity. Where that move would raise a sphere's potential energy by
   more than the solve took from its kinetic energy (a speculative row slowing an
-  approach from above), it is shortened to the break-even length, so the energy of
-  a step never grows;
+  approach from above), it is shortened to the break-even length, so the move adds
+  no sphere more energy than its own velocity change took (the sum can still rise:
+  the solve passes momentum between spheres);
 - split impulse (Catto; Bullet): overlap left after that is removed by
   pseudo-velocities ``w`` solved the same way (``w_n >= -gap/h``, no warm start),
   which move positions (``x += h w``) and never change velocities. Pair
-  pseudo-impulses conserve sum m x, so they do not change potential energy.
+  pseudo-impulses conserve sum m x, so they do not change potential energy; wall
+  rows lift spheres out of the floor, which does.
 
 Parallel scheme: a contact is owned by the grid cell that owns the pair (the cell
 of the sphere for a wall row); cells of one colour have disjoint 2x2x2 blocks
