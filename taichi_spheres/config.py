@@ -185,6 +185,13 @@ class Tuning:
                       performance=dataclasses.replace(self.performance, **groups["performance"]))
 
 
+def field_types() -> dict:
+    """Every Tuning field name (Rules and Performance) and the type of its value (bool,
+    int, float or str)."""
+    return {f.name: type(getattr(group, f.name))
+            for group in (Rules(), Performance()) for f in dataclasses.fields(group)}
+
+
 def _fits(value, default) -> bool:
     """value can stand for default: a bool for a bool, an int for an int, a number for a
     float, a string for a string."""

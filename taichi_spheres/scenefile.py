@@ -32,6 +32,9 @@ Units are SI, z is up. docs/scenes.md lists every key and its default.
     [[material]] name, restitution, friction, rolling_friction; [[material_pair]]
                  materials (two names) and the pair's values; the sphere tables'
                  material key names one (scenematerials.py; default: [physics])
+    [tuning]   fields of config.Rules and config.Performance (the engine's options,
+               e.g. relaxation, contact_iterations): scene.meta["tuning"], which a
+               Simulation of the scene takes unless it is given tuning=
 """
 from __future__ import annotations
 
@@ -57,7 +60,7 @@ __all__ = ["load_scene", "scene_from_dict", "SceneFileError"]
 _TOP = {"name": str, "box": dict, "physics": dict, "run": dict, "render": dict, "output": dict,
         "initial": dict, "spheres": list, "lattice": list, "random": list, "pour": list,
         "plane": list, "cylinder": list, "cone": list, "sink": list, "material": list,
-        "material_pair": list}
+        "material_pair": list, "tuning": dict}
 _RENDER = {"width": int, "height": int, "camera_position": "vec3", "camera_lookat": "vec3",
            "fov": float, "colours": str, "background": "vec3"}
 _BOX = {"lo": "vec3", "hi": "vec3", "periodic": "bool3", "wall_restitution": float}
@@ -93,7 +96,7 @@ class SceneFileError(ValueError):
 
 def load_scene(path) -> Scene:
     """Read a TOML scene file and return a validated Scene (``scene.meta`` holds the
-    [run] and [physics] settings that are not part of the Scene itself)."""
+    [run], [physics] and [tuning] settings that are not part of the Scene itself)."""
     path = str(path)
     try:
         with open(path, "rb") as fh:
@@ -126,6 +129,8 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
                         "[[material]] and [[material_pair]] apply to sphere tables")
     meta = {"run": tables["run"], "physics": physics, "render": tables["render"],
             "output": tables["output"], "source": source}
+    if tables["tuning"]:
+        meta["tuning"] = tables["tuning"]
     if "gsd" in initial and not problems:
         return _scene_from_initial(initial, box, physics, dict(data, _shapes=shapes), meta,
                                    source)
@@ -138,15 +143,33 @@ def scene_from_dict(data: dict, source="scene") -> Scene:
 
 def _settings_tables(data, problems) -> dict:
     """The settings tables of a scene file by name (box, physics, run, render, output,
-    initial; {} when absent or not a table), after checking their keys, types and
-    the output and render values."""
+    initial, tuning; {} when absent or not a table), after checking their keys, types
+    and the output, render and tuning values."""
     _check_table(data, _TOP, "", problems)
     tables = {key: _table(data, key, schema, problems) for key, schema in
               (("box", _BOX), ("physics", _PHYSICS), ("run", _RUN), ("render", _RENDER),
                ("output", _OUTPUT), ("initial", _INITIAL))}
     _check_output(tables["output"], problems)
     _check_render(tables["render"], tables["run"], problems)
+    tables["tuning"] = _tuning_table(data, problems)
     return tables
+
+
+def _tuning_table(data, problems) -> dict:
+    """[tuning]: Tuning.with_ keywords (config.Rules and Performance fields), checked by
+    name (an unknown one with the nearest valid name), type and range; {} when absent."""
+    from .config import Tuning, field_types
+    table = data.get("tuning", {})
+    if not isinstance(table, dict):
+        return {}
+    schema = field_types()
+    _check_table(table, schema, "tuning.", problems)
+    valid = {k: v for k, v in table.items() if k in schema and _type_problem(v, schema[k]) is None}
+    try:
+        Tuning().with_(**valid)
+    except ValueError as exc:
+        problems.append(str(exc).replace("tuning ", "tuning.", 1))
+    return valid
 
 
 def _sphere_groups(data, problems) -> list:

@@ -153,8 +153,8 @@ class Simulation:
     faster in tools/peer_lammps.py), at the price of compiling its kernels once per scene
     (~10-60 s on 2 cores; Taichi's offline cache keeps them for later runs); ignored
     elsewhere. Off by default: worth it for long or repeated runs. tuning: the
-    engine's options (config.Tuning: physics rules and performance knobs; default
-    config.DEFAULT).
+    engine's options (config.Tuning: physics rules and performance knobs; default: the
+    scene file's [tuning] table, ``scene.meta["tuning"]``, on config.DEFAULT).
     """
 
     def __init__(self, scene: Scene, arch: str = "cpu", precision: str | None = None,
@@ -166,7 +166,7 @@ class Simulation:
         self.scene = scene
         self.step_fraction = step_fraction
         self.max_sweeps = max_sweeps
-        self.tuning = tuning or DEFAULT
+        self.tuning = tuning or DEFAULT.with_(**scene.meta.get("tuning", {}))
         self.rest_speed = rest_speed_for(scene, step_fraction, self.tuning)
         self.features = Features.from_scene(scene, self.rest_speed)
         if compile_all:

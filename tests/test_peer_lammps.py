@@ -88,7 +88,8 @@ def _scene_args(*extra):
     ap = argparse.ArgumentParser()
     args = argparse.Namespace(scene=POUR, phases=None, threads=None, out=None,
                               lammps_threads=1, young=5e9, poisson=0.3, dt=5e-6,
-                              overlap_every=10, only="taichi", lammps_json=None)
+                              overlap_every=10, only="taichi", lammps_json=None,
+                              tuning=None)
     for key, value in extra:
         setattr(args, key, value)
     return args, ap
@@ -115,3 +116,34 @@ def test_saved_run_needs_the_same_scene(tmp_path):
     args.scene_digest = "0" * 16
     with pytest.raises(ValueError, match="scene_digest"):
         peer_lammps.load_lammps(str(path), args, peer_lammps.SCENE_SAVED_KEYS)
+
+
+def test_tuning_items_become_tuning_keywords():
+    """--tuning NAME=VALUE: numbers and True/False as Python values, other text as
+    strings; a bad name or value, an item without '=', or --tuning without --out stops
+    with an error."""
+    ap = argparse.ArgumentParser()
+    assert peer_lammps.tuning_args(["relaxation=1.8", "contact_iterations=40",
+                                    "shock_propagation=on", "warm_start=False"], ap) == \
+        dict(relaxation=1.8, contact_iterations=40, shock_propagation="on", warm_start=False)
+    assert peer_lammps.tuning_args(None, ap) == {}
+    for bad in (["relaxaton=1.8"], ["relaxation"], ["relaxation=2.5"]):
+        with pytest.raises(SystemExit):
+            peer_lammps.tuning_args(bad, ap)
+    args, ap = _scene_args(("tuning", ["relaxation=1.8"]))
+    with pytest.raises(SystemExit):
+        peer_lammps.scene_args(args, ap)
+
+
+def test_saved_lammps_run_only_on_its_cpu_model():
+    """A saved LAMMPS run from another CPU model is not reused: LAMMPS runs again, or
+    with --only taichi the tool stops (wall times compare only on one machine)."""
+    from machine import cpu_name
+    args, ap = _scene_args(("lammps_json", "saved.json"))
+    here = dict(cpu=cpu_name(), result={})
+    assert peer_lammps.same_machine(here, args, ap) is here
+    elsewhere = dict(cpu="Some Other CPU", result={})
+    with pytest.raises(SystemExit):
+        peer_lammps.same_machine(elsewhere, args, ap)
+    args.only = "both"
+    assert peer_lammps.same_machine(elsewhere, args, ap) is None

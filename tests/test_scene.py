@@ -536,7 +536,35 @@ def test_unknown_top_level_key(tmp_path):
     problems, msg = load_problems(tmp_path, 'bogus = 1\n' + GOOD)
     assert problems == ["unknown key 'bogus' (valid: box, cone, cylinder, initial, lattice, "
                         "material, material_pair, name, output, physics, plane, pour, "
-                        "random, render, run, sink, spheres)"]
+                        "random, render, run, sink, spheres, tuning)"]
+
+
+def test_tuning_table_sets_the_simulations_options(tmp_path, arch):
+    """[tuning] names Rules and Performance fields; a Simulation of the scene takes
+    them unless it is given tuning=."""
+    from taichi_spheres.config import DEFAULT
+    scene = ts.load_scene(write(tmp_path, GOOD + "\n[tuning]\nrelaxation = 1.8\n"
+                                "contact_iterations = 40\nshock_propagation = \"on\"\n"
+                                "warm_start = true\n"))
+    assert scene.meta["tuning"] == dict(relaxation=1.8, contact_iterations=40,
+                                        shock_propagation="on", warm_start=True)
+    sim = ts.Simulation(scene, arch=arch)
+    assert sim.tuning == DEFAULT.with_(relaxation=1.8, contact_iterations=40,
+                                       shock_propagation="on")
+    assert ts.Simulation(scene, arch=arch, tuning=DEFAULT).tuning == DEFAULT
+    assert "tuning" not in ts.load_scene(write(tmp_path, GOOD)).meta
+
+
+@pytest.mark.parametrize("line, problem", [
+    ("relaxaton = 1.8", "unknown key 'tuning.relaxaton' (did you mean 'tuning.relaxation'?)"),
+    ("contact_iterations = 4.5", "tuning.contact_iterations: must be an integer, got 4.5"),
+    ("relaxation = 2.5", "tuning.relaxation must be in (0, 2), got 2.5"),
+    ('shock_propagation = "always"', "tuning.shock_propagation must be one of auto, on, off, "
+                                     "got 'always'"),
+])
+def test_bad_tuning_key_is_named(tmp_path, line, problem):
+    problems, _ = load_problems(tmp_path, GOOD + "\n[tuning]\n" + line + "\n")
+    assert problems == [problem]
 
 
 def test_misspelt_top_level_key_gets_suggestion(tmp_path):
