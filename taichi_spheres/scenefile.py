@@ -164,7 +164,7 @@ def _tuning_table(data, problems) -> dict:
         return {}
     schema = field_types()
     _check_table(table, schema, "tuning.", problems)
-    valid = {k: v for k, v in table.items() if k in schema and _type_problem(v, schema[k]) is None}
+    valid = {k: v for k, v in table.items() if k in schema and _valid(table, k, schema) is not None}
     try:
         Tuning().with_(**valid)
     except ValueError as exc:
