@@ -138,6 +138,10 @@ class Performance:
         counts once; a dense pack of equal spheres has about 3 plus walls).
     warm_slots: warm-start impulses kept per sphere (for the rows where it is the
         lower id; a sphere with more keeps none).
+    solver_interleave: on the CPU, cells of one colour whose rows one thread sweeps
+        interleaved (contacts/pgs.py sweep_cells; a GPU sweeps one cell per thread):
+        a row update waits on the previous one of its cell, and the processor
+        overlaps the other cells' updates meanwhile.
     """
 
     serial_light_below: int = 200_000
@@ -159,6 +163,13 @@ class Performance:
     serial_solver_below: int = 30_000
     contacts_per_sphere: int = 8
     warm_slots: int = 16
+    solver_interleave: int = 8
+
+    def __post_init__(self):
+        """ValueError naming the field: solver_interleave below 1."""
+        if self.solver_interleave < 1:
+            raise ValueError(f"tuning solver_interleave must be >= 1, "
+                             f"got {self.solver_interleave!r}")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -14,6 +14,7 @@ import pytest
 
 import taichi_spheres as ts
 from taichi_spheres import observe
+from taichi_spheres.config import Tuning
 from taichi_spheres.reference import walton_impact
 
 from conftest import tol
@@ -187,16 +188,19 @@ def test_frictional_pile_energy_is_booked_and_settles(arch, mu_r):
 
 
 def test_friction_same_bits_for_any_thread_count(arch):
-    """The frictional solve gives the same bits on 1 and 2 threads (a CPU property)."""
+    """The frictional solve gives the same bits on 1 and 2 threads, and with one cell
+    per sweep loop iteration or several interleaved (Performance.solver_interleave)
+    (CPU properties)."""
     if arch != "cpu":
         pytest.skip("thread counts are a CPU setting")
     digests = []
-    for threads in (1, 2):
-        sim = ts.Simulation(_pile(), arch=arch, precision="f64", threads=threads)
+    for threads, interleave in ((1, 8), (2, 8), (1, 1)):
+        sim = ts.Simulation(_pile(), arch=arch, precision="f64", threads=threads,
+                            tuning=Tuning().with_(solver_interleave=interleave))
         sim.advance(0.3)
         st = sim.state()
         digests.append((observe.state_digest(st, "f64"), st.omega.tobytes()))
-    assert digests[0] == digests[1]
+    assert digests[0] == digests[1] == digests[2]
 
 
 def _silo(hole, mu=0.5, recycle=False, n_side=5):

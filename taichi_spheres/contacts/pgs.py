@@ -1,5 +1,6 @@
 """Projected Gauss–Seidel sweeps of the contact solver (contacts/solver.py): one
-update per row, cells of one colour in parallel, colours in turn.
+update per row, cells of one colour in parallel (on the CPU a few of them per thread,
+interleaved: sweep_cells), colours in turn.
 
 Row update (Catto's sequential impulses, Moreau–Jean): with u_n the row's normal
 relative velocity (separating > 0), lambda = max(lambda + omega m_eff (target - u_n),
@@ -81,20 +82,45 @@ class GaussSeidel:
         return ti.abs(new - old) / meff
 
     @ti.func
-    def sweep_cell(self, k, mode: ti.template(), omega):
-        """Solve cell k's rows in order; the largest change goes to ``residual``."""
+    def rows_of(self, k):
+        """Cell k's rows [lo, hi) within the solver's capacity."""
+        return self.cell_start[k], ti.min(self.cell_start[k + 1], ti.static(self.capacity))
+
+    @ti.func
+    def sweep_cells(self, t, end, mode: ti.template(), omega):
+        """Cells active_cells[t : min(t + k, end)] of one colour (k =
+        Performance.solver_interleave on the CPU, 1 on a GPU), their rows interleaved:
+        row j of each cell, then row j + 1 of each. Each cell's rows stay in order and
+        the cells share no sphere, so the bits are those of one cell after the other,
+        while the processor overlaps the cells' updates: a row update waits on the
+        previous one of its cell (they share a sphere), not on the other cells'. The
+        largest change goes to ``residual``."""
+        k = ti.static(self.interleave)
+        lo = ti.Vector.zero(ti.i32, k)
+        hi = ti.Vector.zero(ti.i32, k)
+        longest = 0
+        for c in ti.static(range(k)):
+            if t + c < end:
+                lo[c], hi[c] = self.rows_of(self.active_cells[t + c])
+                longest = ti.max(longest, hi[c] - lo[c])
         worst = ti.cast(0, self.real)
-        for s in range(self.cell_start[k], ti.min(self.cell_start[k + 1], ti.static(self.capacity))):
-            worst = ti.max(worst, self.solve_row(s, mode, omega))
+        for j in range(longest):
+            for c in ti.static(range(k)):
+                if lo[c] + j < hi[c]:
+                    worst = ti.max(worst, self.solve_row(lo[c] + j, mode, omega))
         ti.atomic_max(self.residual[None], worst)
 
     @ti.func
     def sweep_colour(self, colour, mode: ti.template(), serial: ti.template(), omega):
         """One pass over the cells of one colour that own rows (disjoint blocks: no two
-        threads touch a sphere), in list_active_cells order."""
+        threads touch a sphere), in list_active_cells order, a few cells interleaved
+        (sweep_cells)."""
+        start = self.colour_active[colour]
+        end = self.colour_active[colour + 1]
+        k = ti.static(self.interleave)
         ti.loop_config(serialize=serial)
-        for t in range(self.colour_active[colour], self.colour_active[colour + 1]):
-            self.sweep_cell(self.active_cells[t], mode, omega)
+        for u in range((end - start + k - 1) // k):
+            self.sweep_cells(start + k * u, end, mode, omega)
 
     @ti.func
     def colour_of(self, k):
@@ -105,7 +131,8 @@ class GaussSeidel:
     @ti.func
     def owns_rows(self, k):
         """Cell k owns rows within the solver's capacity."""
-        return ti.min(self.cell_start[k + 1], ti.static(self.capacity)) > self.cell_start[k]
+        lo, hi = self.rows_of(k)
+        return hi > lo
 
     @ti.func
     def list_active_cells(self):

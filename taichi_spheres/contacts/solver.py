@@ -35,7 +35,8 @@ Parallel scheme: a contact is owned by the grid cell that owns the pair (the cel
 of the sphere for a wall row); cells of one colour have disjoint 2x2x2 blocks
 (grid.py), so one thread per cell sweeps its rows serially, in a fixed order
 (pairs by sphere ids, then wall rows: Box2D solves them last), with no races, and
-the result does not depend on the thread count. Iterations stop when no row
+the result does not depend on the thread count (on the CPU one thread sweeps a few
+cells of a colour interleaved, the same bits: pgs.sweep_cells). Iterations stop when no row
 changed a velocity by more than ``Rules.contact_tolerance`` x the impact speed
 (or the positions by more than a tenth of ``Rules.overlap_tolerance`` of the
 smallest diameter), at most ``Rules.contact_iterations`` / ``position_iterations``.
@@ -100,6 +101,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         self.rules = tuning.physics
         self.perf = tuning.performance
         self.capacity = self.perf.contacts_per_sphere * state.capacity
+        # cells one thread sweeps interleaved (pgs.sweep_cells): a GPU hides latency
+        # with more threads instead
+        self.interleave = self.perf.solver_interleave if cpu else 1
         self.shock = shock_compiled(features, self.rules)
         self._allocate(state.capacity, grid.cell_capacity)
         self._build_kernels()
