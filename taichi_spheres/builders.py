@@ -9,7 +9,7 @@ from .geometry import Cylinder
 from .materials import Material
 from .scene import Scene
 
-__all__ = ["gas", "same_bits_scene"]
+__all__ = ["gas", "same_bits_scene", "fcc_block", "ball_on_block"]
 
 
 def gas(n, packing=0.3, radius=0.5, periodic=True, gravity=(0.0, 0.0, 0.0), restitution=1.0,
@@ -86,3 +86,46 @@ def same_bits_scene(n=400, frictional=False, materials=False):
     return Scene.from_arrays(x, v, radius, mass=mass, box=((0.0,) * 3, (side * spacing,) * 3),
                              periodic=(True, True, False), gravity=(0.0, 0.0, -9.81),
                              restitution=0.8, wall_restitution=0.9, name="same_bits", **extra)
+
+
+def fcc_block(cells=(5, 5, 10), radius=0.01, spacing=1.0 + 1e-6, restitution=0.5,
+              gravity=9.81):
+    """A face-centred cubic block of 4 cx cy cz equal spheres of ``radius`` [m] (``cells``:
+    lattice cells per axis, an int for a cube; (5, 5, 10) gives 1,000), nearest
+    neighbours ``spacing`` diameters apart, resting on the floor of a box that fits it
+    on x and y (the layers sit in each other's hollows: stable without friction) and
+    is 0.1 m taller, under gravity -``gravity`` [m/s^2] along z, with ``restitution``
+    between spheres and on the walls."""
+    cells = (cells,) * 3 if isinstance(cells, int) else tuple(cells)
+    r = radius
+    a = 2 * np.sqrt(2) * r * spacing
+    base = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
+    idx = np.array(np.meshgrid(*[np.arange(c) for c in cells], indexing="ij")).reshape(3, -1).T
+    x = ((idx[:, None, :] + base[None]) * a).reshape(-1, 3) + r * (1 + 1e-6)
+    side = [(c - 0.5) * a + 2 * r * (1 + 1e-6) for c in cells[:2]]
+    return Scene.from_arrays(x, np.zeros_like(x), np.full(len(x), r),
+                             box=((0, 0, 0), (side[0], side[1], cells[2] * a + 0.1)),
+                             gravity=(0, 0, -gravity), restitution=restitution,
+                             wall_restitution=restitution)
+
+
+def ball_on_block(block: Scene, settled, ratio=8.0, height=0.05, speed=1.0):
+    """A ball ``ratio`` x heavier than the spheres of ``block`` (an :func:`fcc_block`,
+    same radius) dropped onto it once settled: returns (scene, x, v) where the scene
+    holds the lattice block and the ball ``height`` [m] above its top sphere's centre,
+    and x, v (N + 1, 3) are ``settled`` (a State of the block) with the ball that
+    height above the settled top, moving down at ``speed`` [m/s], for
+    ``Simulation.set_state`` (settled spheres touch to round-off, which a scene
+    refuses)."""
+    top = settled.x[:, 2].max()
+    centre = [settled.x[:, 0].mean(), settled.x[:, 1].mean()]
+    mass = np.append(settled.mass, ratio * settled.mass[0])
+    start = [[centre[0], centre[1], block.x[:, 2].max() + height]]
+    scene = Scene.from_arrays(np.vstack([block.x, start]), np.zeros((len(mass), 3)),
+                              np.full(len(mass), block.radius[0]), mass=mass,
+                              box=(block.box_lo, block.box_hi), gravity=block.gravity,
+                              restitution=block.restitution,
+                              wall_restitution=block.wall_restitution)
+    x = np.vstack([settled.x, [[centre[0], centre[1], top + height]]])
+    v = np.vstack([settled.v, [[0.0, 0.0, -speed]]])
+    return scene, x, v

@@ -138,10 +138,10 @@ class Performance:
         counts once; a dense pack of equal spheres has about 3 plus walls).
     warm_slots: warm-start impulses kept per sphere (for the rows where it is the
         lower id; a sphere with more keeps none).
-    solver_interleave: on the CPU, cells of one colour whose rows one thread sweeps
-        interleaved (contacts/pgs.py sweep_cells; a GPU sweeps one cell per thread):
-        a row update waits on the previous one of its cell, and the processor
-        overlaps the other cells' updates meanwhile.
+    solver_interleave: on the CPU, cells of one colour whose rows one thread of the
+        contact solver sweeps interleaved (contacts/pgs.py sweep_cells; a GPU sweeps
+        one cell per thread): a row update waits on the previous one of its cell, and
+        the processor overlaps the other cells' updates meanwhile.
     """
 
     serial_light_below: int = 200_000

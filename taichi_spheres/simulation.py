@@ -362,14 +362,39 @@ class Simulation:
             return
         t0 = _time.perf_counter()
         while self.time < t_end:
-            h = self.max_step()
-            remaining = t_end - self.time
-            last = h >= remaining
-            if last:
-                h = remaining
-            self.step(h)
-            self.time = t_end if last or self.n == 0 else self.time + h
+            self._step_toward(t_end)
         self.sim_seconds += _time.perf_counter() - t0
+
+    def step_toward(self, t_end: float) -> float:
+        """One of :meth:`advance_to`'s steps toward the absolute time ``t_end`` [s]: the
+        adaptive step, or what is left to ``t_end`` if that is shorter; advances
+        ``time`` and returns the step's length [s] (0 at ``t_end``). For observing a run
+        step by step: a loop of these takes the same steps, with the same bits, as
+        ``advance_to(t_end)``."""
+        t_end = float(t_end)
+        if not math.isfinite(t_end) or t_end < self.time:
+            raise ValueError(f"cannot step toward t={t_end} from t={self.time}")
+        if self.time >= t_end:
+            return 0.0
+        if self.n == 0:
+            h, self.time = t_end - self.time, t_end
+            return h
+        self._check()
+        t0 = _time.perf_counter()
+        h = self._step_toward(t_end)
+        self.sim_seconds += _time.perf_counter() - t0
+        return h
+
+    def _step_toward(self, t_end: float) -> float:
+        """The step of advance_to's loop (time < t_end, spheres left); returns h [s]."""
+        h = self.max_step()
+        remaining = t_end - self.time
+        last = h >= remaining
+        if last:
+            h = remaining
+        self.step(h)
+        self.time = t_end if last or self.n == 0 else self.time + h
+        return h
 
     def max_step(self) -> float:
         """Largest h such that no sphere moves more than step_fraction * r_min [s]:

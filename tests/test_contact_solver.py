@@ -9,6 +9,7 @@ import pytest
 
 import taichi_spheres as ts
 from taichi_spheres import observe
+from taichi_spheres.builders import ball_on_block, fcc_block
 from taichi_spheres.config import Tuning
 
 G = 9.81
@@ -23,22 +24,6 @@ def _column(n, mass=None, gap=1e-4, e=0.5):
     return ts.Scene.from_arrays(x, np.zeros((n, 3)), np.full(n, R), mass=mass,
                                 box=((0, 0, 0), (0.1, 0.1, (2 * R + gap) * n + 0.1)),
                                 gravity=(0, 0, -G), restitution=e, wall_restitution=e)
-
-
-def _fcc_block(cells=(5, 5, 10), spacing=1.0 + 1e-6, e=0.5):
-    """An FCC block of 4 cx cy cz spheres (1,000 for (5, 5, 10); an int: a cube),
-    nearest neighbours ``spacing`` diameters apart, in a box that fits it on x and y
-    (the layers sit in each other's hollows: stable without friction), under gravity."""
-    cells = (cells,) * 3 if isinstance(cells, int) else tuple(cells)
-    a = 2 * np.sqrt(2) * R * spacing
-    base = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
-    idx = np.array(np.meshgrid(*[np.arange(c) for c in cells], indexing="ij")).reshape(3, -1).T
-    x = ((idx[:, None, :] + base[None]) * a).reshape(-1, 3) + R * (1 + 1e-6)
-    side = [(c - 0.5) * a + 2 * R * (1 + 1e-6) for c in cells[:2]]
-    hi = (side[0], side[1], cells[2] * a + 0.1)
-    return ts.Scene.from_arrays(x, np.zeros_like(x), np.full(len(x), R),
-                                box=((0, 0, 0), hi), gravity=(0, 0, -G), restitution=e,
-                                wall_restitution=e)
 
 
 def _overlap(st, scene):
@@ -83,7 +68,7 @@ def test_column_settles_without_overlap_or_drift(arch, precision, n):
 def test_fcc_block_settles_and_holds(arch):
     """1,000 spheres in an FCC block on the floor: settled within 1 s, then held for 2 s
     without drift, at rest and without overlap."""
-    scene = _fcc_block()
+    scene = fcc_block()
     assert scene.n == 1000
     sim = ts.Simulation(scene, arch=arch)
     sim.advance(1.0)
@@ -105,7 +90,7 @@ def test_energy_stays_below_the_start_and_is_booked(arch):
     total energy is below the initial one, and every joule is booked (impacts and
     contacts). (Step by step it can rise by the potential energy of an overlap the
     split impulse removes: docs/algorithm.md.)"""
-    for scene in (_column(20), _fcc_block(4)):
+    for scene in (_column(20), fcc_block(4)):
         sim = ts.Simulation(scene, arch=arch)
         e = _energies_by_step(sim, 150)
         assert e.max() <= e[0] * (1 + 1e-12)
@@ -322,7 +307,7 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     both paths (with a cap of 15 sweeps, 10 of them plain, solves also stop inside
     the plain ones)."""
     scene, seconds = ((_periodic_layer_scene(), 0.2) if case == "odd periodic colours"
-                      else (_fcc_block(4), 0.3))
+                      else (fcc_block(4), 0.3))
     rules = {}
     if "relaxation" in case:
         rules["relaxation"] = 1.8
@@ -387,24 +372,15 @@ def test_heavy_ball_dropped_onto_a_settled_bed(arch, shock):
     of up to ``ov0`` of a diameter, which the split impulse removes: that may lift each
     of its layers by ov0 diameters, and the energy may exceed the start by that
     potential energy (docs/algorithm.md)."""
-    scene = _fcc_block(4)
+    scene = fcc_block(4)
     sim = ts.Simulation(scene, arch=arch)
     sim.advance(1.0)
     st = sim.state()
     layers = np.unique(np.round(st.x[:, 2] / R, 1)).size
     lift = st.mass.sum() * G * layers * _overlap(st, scene) * 2 * R     # [J]
-    top = st.x[:, 2].max()
-    ball = [[st.x[:, 0].mean(), st.x[:, 1].mean(), top + 0.05]]
-    ball_at_start = [[ball[0][0], ball[0][1], scene.x[:, 2].max() + 0.05]]
-    mass = np.append(st.mass, 8 * st.mass[0])
-    # the scene from the lattice (settled spheres touch to round-off, which a scene
-    # refuses), then the settled state with set_state
-    bed = ts.Scene.from_arrays(np.vstack([scene.x, ball_at_start]), np.zeros((len(mass), 3)),
-                               np.full(len(mass), R), mass=mass,
-                               box=(scene.box_lo, scene.box_hi), gravity=(0, 0, -G),
-                               restitution=0.5, wall_restitution=0.5)
+    bed, x, v = ball_on_block(scene, st, ratio=8.0, height=0.05, speed=1.0)
     sim = ts.Simulation(bed, arch=arch, tuning=Tuning().with_(shock_propagation=shock))
-    sim.set_state(np.vstack([st.x, ball]), np.vstack([st.v, [[0.0, 0.0, -1.0]]]))
+    sim.set_state(x, v)
     sim.initial_energy = sim.energy_budget()["current"]
     e = _energies_by_step(sim, 200)
     assert e.max() <= e[0] * (1 + 1e-12) + lift

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import taichi_spheres as ts
-from taichi_spheres.builders import gas
+from taichi_spheres.builders import gas, same_bits_scene
 from conftest import tol, tol_for
 
 
@@ -105,6 +105,29 @@ def test_steps_land_exactly_on_requested_times(arch):
         sim.advance(-1.0)
     with pytest.raises(ValueError):
         sim.advance(float("nan"))
+
+
+def test_step_toward_takes_the_steps_of_advance_to(arch):
+    """A loop of step_toward(t) takes advance_to(t)'s steps (same count, same bits),
+    lands on t, returns each step's length and 0 once there, and refuses a time in the
+    past or not finite."""
+    scene = same_bits_scene(200)
+    whole = ts.Simulation(scene, arch=arch)
+    whole.advance_to(0.05)
+    stepped = ts.Simulation(scene, arch=arch)
+    lengths = []
+    while stepped.time < 0.05:
+        lengths.append(stepped.step_toward(0.05))
+    assert stepped.time == 0.05
+    assert len(lengths) == whole.stats["steps"] == stepped.stats["steps"]
+    assert abs(sum(lengths) - 0.05) <= 1e-12
+    assert lengths[-1] == stepped.last_step["h"]
+    assert ts.observe.state_digest(stepped.state(), stepped.precision) == \
+        ts.observe.state_digest(whole.state(), whole.precision)
+    assert stepped.step_toward(0.05) == 0.0
+    for bad in (0.01, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="cannot step toward"):
+            stepped.step_toward(bad)
 
 
 def test_adaptive_step_bounds_displacement(arch):

@@ -50,6 +50,7 @@ sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import taichi_spheres as ts  # noqa: E402
+from taichi_spheres.builders import ball_on_block, fcc_block  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from taichi_spheres.simulation import DEFAULT_STEP_FRACTION  # noqa: E402
 from machine import cpu_name, publish, untimed_pass  # noqa: E402  (tools/machine.py)
@@ -112,15 +113,12 @@ Variant = collections.namedtuple("Variant", "vel pos shock omega step_fraction",
 
 
 def stepped_energy_growth(sim, t_end):
-    """Advance to t_end with advance_to's steps, one at a time; returns the largest
-    growth of the total energy (kinetic + potential) in one step [J] (0 if it never
-    grew) and the largest overlap after a step / contact distance."""
+    """Advance to t_end with advance_to's steps, one at a time (Simulation.step_toward);
+    returns the largest growth of the total energy (kinetic + potential) in one step
+    [J] (0 if it never grew) and the largest overlap after a step / contact distance."""
     worst, last, overlap = 0.0, sim.energy_budget()["current"], 0.0
     while sim.time < t_end:
-        h = sim.max_step()
-        final = h >= t_end - sim.time
-        sim.step(t_end - sim.time if final else h)
-        sim.time = t_end if final else sim.time + h
+        sim.step_toward(t_end)
         now = sim.energy_budget()["current"]
         worst, last = max(worst, now - last), now
         overlap = max(overlap, sim.last_step["max_overlap"])
@@ -195,16 +193,10 @@ def heavy_ball(settings: str, steps: int = 200) -> dict:
     block = fcc_bed(256, layers=4)
     sim = ts.Simulation(block, tuning=tuning)
     sim.advance(1.0)
-    st = sim.state()
-    ball = [[st.x[:, 0].mean(), st.x[:, 1].mean(), st.x[:, 2].max() + 0.05]]
-    start = [[ball[0][0], ball[0][1], block.x[:, 2].max() + 0.05]]
-    mass = np.append(st.mass, 8 * st.mass[0])
-    scene = ts.Scene.from_arrays(np.vstack([block.x, start]), np.zeros((len(mass), 3)),
-                                 np.full(len(mass), 0.01), mass=mass,
-                                 box=(block.box_lo, block.box_hi), gravity=(0, 0, -G),
-                                 restitution=0.5, wall_restitution=0.5)
+    scene, x, v = ball_on_block(block, sim.state(), ratio=8.0, height=0.05, speed=1.0)
+    mass = scene.mass
     sim = ts.Simulation(scene, tuning=tuning)
-    sim.set_state(np.vstack([st.x, ball]), np.vstack([st.v, [[0.0, 0.0, -1.0]]]))
+    sim.set_state(x, v)
     energy = [sim.energy_budget()["current"]]
     for _ in range(steps):
         sim.advance(sim.max_step())
@@ -219,17 +211,8 @@ def fcc_bed(n_target: int, layers: int = 5):
     """A flat FCC block of about n_target spheres (r = 0.01 m), ``layers`` lattice cells
     (2 x layers sphere layers) tall, in a box that fits it on x and y, nearest
     neighbours 1 + 1e-6 diameters apart."""
-    r = 0.01
     side_cells = max(1, round((n_target / (4 * layers)) ** 0.5))
-    cells = (side_cells, side_cells, layers)
-    a = 2 * np.sqrt(2) * r * (1 + 1e-6)
-    base = np.array([[0, 0, 0], [0.5, 0.5, 0], [0.5, 0, 0.5], [0, 0.5, 0.5]])
-    idx = np.array(np.meshgrid(*[np.arange(c) for c in cells], indexing="ij")).reshape(3, -1).T
-    x = ((idx[:, None, :] + base[None]) * a).reshape(-1, 3) + r * (1 + 1e-6)
-    side = (side_cells - 0.5) * a + 2 * r * (1 + 1e-6)
-    return ts.Scene.from_arrays(x, np.zeros_like(x), np.full(len(x), r),
-                                box=((0, 0, 0), (side, side, layers * a + 0.1)),
-                                gravity=(0, 0, -G), restitution=0.5, wall_restitution=0.5)
+    return fcc_block((side_cells, side_cells, layers), radius=0.01, restitution=0.5, gravity=G)
 
 
 def bed_child(n_target: int, hold: float, settings: str, settle: float = 0.5) -> dict:

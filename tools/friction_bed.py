@@ -40,9 +40,8 @@ def phases(scene, t1, t2, threads) -> dict:
     before = dict(sim.stats)
     worst = 0.0
     t0 = time.perf_counter()
-    while sim.time < t2 - 1e-12:
-        sim.step(min(sim.max_step(), t2 - sim.time))
-        sim.time = min(t2, sim.time + sim.last_step["h"])
+    while sim.time < t2:
+        sim.step_toward(t2)
         worst = max(worst, sim.last_step["max_overlap"])
     bed = (time.perf_counter() - t0) / (t2 - t1)
     s = sim.stats

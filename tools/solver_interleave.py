@@ -11,12 +11,20 @@ processor k independent chains to overlap, with the bits of one cell after the o
 
 Runs on one thread, from the state at --at s (reached once, untimed): the pour's bed
 (scenes/pour.toml, frictionless) and the same pour with friction mu = 0.5 on pairs
-and walls, for --window s, for each k in --interleave. Reported per scene and k:
-wall seconds per simulated second of the window (fastest of --repeat runs from the
-same state, after an untimed pass that compiles), contact rows and velocity sweeps
-per step, and whether the state at the end has the same bits as with k = 1.
+and walls, for --window s, for each k in --interleave. These 2,000 spheres run the
+serial one-launch solver. Reported per scene and k: wall seconds per simulated second
+of the window (fastest of --repeat runs from the same state, after an untimed pass
+that compiles), contact rows and velocity sweeps per step, and whether the state at
+the end has the same bits as with k = 1.
 
-    python tools/solver_interleave.py               # ~2 min
+Then the parallel solver path (one launch per sweep, each colour a parallel loop): an
+FCC block of about --bed-n spheres (10 sphere layers, tools/contact_solver.py's bed)
+settled 0.5 s, held --bed-window s on 1 and 2 threads with k = 1 and 8 (the parallel
+path forced: Performance.serial_heavy_below = serial_solver_below = 0), the runs
+alternated --bed-repeat times (two threads on a shared machine vary by tens of per
+cent from run to run): median and fastest wall seconds per simulated second.
+
+    python tools/solver_interleave.py               # ~6 min
     python tools/solver_interleave.py --write       # the 'solver-interleave' section of docs/bench.md
 """
 from __future__ import annotations
@@ -34,6 +42,7 @@ sys.path.insert(0, HERE)
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from machine import cpu_name, publish, untimed_pass  # noqa: E402  (tools/machine.py)
+from contact_solver import fcc_bed  # noqa: E402  (tools/contact_solver.py)
 
 
 def scenes(path: str) -> dict:
@@ -64,6 +73,40 @@ def timed(scene, start: dict, interleave: int, window: float, repeat: int) -> di
                 digest=ts.observe.state_digest(sim.state(), sim.precision))
 
 
+def parallel_bed(n_target: int, window: float, repeat: int) -> list:
+    """Report lines: the settled FCC bed held ``window`` s on 1 and 2 threads with
+    interleave 1 and 8, alternated ``repeat`` times (median and fastest)."""
+    scene = fcc_bed(n_target)
+    sim = ts.Simulation(scene, threads=2)
+    sim.advance(0.5)
+    start = sim.checkpoint()
+    lines = ["", f"Parallel solver path: FCC bed of {scene.n} spheres settled 0.5 s, then "
+                 f"{window:g} s held; {repeat} alternated runs per setting.", "",
+             "| threads | cells interleaved | median wall s / sim s | fastest | same bits as 1 |",
+             "|---|---|---|---|---|"]
+    for threads in (1, 2):
+        sims, times, digests = {}, {}, {}
+        for k in (1, 8):
+            sims[k] = ts.Simulation(scene, threads=threads, tuning=Tuning().with_(
+                solver_interleave=k, serial_heavy_below=0, serial_solver_below=0))
+            sims[k].restore(start)
+            untimed_pass(sims[k], lambda s: s.advance(window))
+            times[k] = []
+        for _ in range(repeat):
+            for k, run in sims.items():
+                run.restore(start)
+                t0 = time.perf_counter()
+                run.advance(window)
+                times[k].append((time.perf_counter() - t0) / window)
+                digests[k] = ts.observe.state_digest(run.state(), run.precision)
+        for k in (1, 8):
+            ordered = sorted(times[k])
+            lines.append(f"| {threads} | {k} | {ordered[len(ordered) // 2]:.1f} | "
+                         f"{ordered[0]:.1f} | {'yes' if digests[k] == digests[1] else 'NO'} |")
+            print(lines[-1], flush=True)
+    return lines
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -72,6 +115,9 @@ def main(argv=None):
     p.add_argument("--window", type=float, default=0.1, help="simulated seconds timed")
     p.add_argument("--interleave", type=int, nargs="+", default=[1, 2, 4, 8, 16])
     p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--bed-n", type=int, default=40_000, help="spheres of the parallel-path bed")
+    p.add_argument("--bed-window", type=float, default=0.06)
+    p.add_argument("--bed-repeat", type=int, default=5)
     p.add_argument("--write", action="store_true")
     a = p.parse_args(argv)
     if a.interleave[0] != 1:
@@ -95,6 +141,7 @@ def main(argv=None):
                          f"{r['rows']:.0f} | {r['sweeps']:.1f} | "
                          f"{'yes' if r['digest'] == base['digest'] else 'NO'} |")
             print(lines[-1], flush=True)
+    lines += parallel_bed(a.bed_n, a.bed_window, a.bed_repeat)
     publish("\n".join(lines), "solver-interleave", a.write)
 
 

@@ -87,15 +87,13 @@ class GaussSeidel:
         return self.cell_start[k], ti.min(self.cell_start[k + 1], ti.static(self.capacity))
 
     @ti.func
-    def sweep_cells(self, t, end, mode: ti.template(), omega):
-        """Cells active_cells[t : min(t + k, end)] of one colour (k =
-        Performance.solver_interleave on the CPU, 1 on a GPU), their rows interleaved:
+    def sweep_cells(self, t, end, mode: ti.template(), omega, k: ti.template()):
+        """Cells active_cells[t : min(t + k, end)] of one colour, their rows interleaved:
         row j of each cell, then row j + 1 of each. Each cell's rows stay in order and
         the cells share no sphere, so the bits are those of one cell after the other,
         while the processor overlaps the cells' updates: a row update waits on the
         previous one of its cell (they share a sphere), not on the other cells'. The
         largest change goes to ``residual``."""
-        k = ti.static(self.interleave)
         lo = ti.Vector.zero(ti.i32, k)
         hi = ti.Vector.zero(ti.i32, k)
         longest = 0
@@ -113,14 +111,14 @@ class GaussSeidel:
     @ti.func
     def sweep_colour(self, colour, mode: ti.template(), serial: ti.template(), omega):
         """One pass over the cells of one colour that own rows (disjoint blocks: no two
-        threads touch a sphere), in list_active_cells order, a few cells interleaved
-        (sweep_cells)."""
+        threads touch a sphere), in list_active_cells order, k cells at a time with their
+        rows interleaved (sweep_cells; k: ContactSolver.interleave)."""
         start = self.colour_active[colour]
         end = self.colour_active[colour + 1]
         k = ti.static(self.interleave)
-        ti.loop_config(serialize=serial)
+        ti.loop_config(serialize=serial, block_dim=ti.static(self.sweep_block))
         for u in range((end - start + k - 1) // k):
-            self.sweep_cells(start + k * u, end, mode, omega)
+            self.sweep_cells(start + k * u, end, mode, omega, k)
 
     @ti.func
     def colour_of(self, k):

@@ -104,6 +104,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         # cells one thread sweeps interleaved (pgs.sweep_cells): a GPU hides latency
         # with more threads instead
         self.interleave = self.perf.solver_interleave if cpu else 1
+        # loop iterations per task of a parallel sweep on the CPU: Taichi's 32 cells, as
+        # 32 / interleave iterations (a power of two), so that a colour still splits
+        # into as many tasks for the threads; a GPU keeps its default
+        self.sweep_block = 1 << max(0, (32 // self.interleave).bit_length() - 1) if cpu else None
         self.shock = shock_compiled(features, self.rules)
         self._allocate(state.capacity, grid.cell_capacity)
         self._build_kernels()
