@@ -138,10 +138,14 @@ class Performance:
         counts once; a dense pack of equal spheres has about 3 plus walls).
     warm_slots: warm-start impulses kept per sphere (for the rows where it is the
         lower id; a sphere with more keeps none).
-    solver_interleave: on the CPU, cells of one colour whose rows one thread of the
-        contact solver sweeps interleaved (contacts/pgs.py sweep_cells; a GPU sweeps
-        one cell per thread): a row update waits on the previous one of its cell, and
-        the processor overlaps the other cells' updates meanwhile.
+    solver_interleave: on the CPU, where the contact solver's sweeps run on one thread
+        (the serial one-launch solver, or a one-thread runtime), cells of one colour
+        whose rows that thread sweeps interleaved (contacts/pgs.py sweep_cells; a GPU
+        sweeps one cell per thread): a row update waits on the previous one of its
+        cell, and the processor overlaps the other cells' updates meanwhile.
+    parallel_interleave: the same for sweeps running in parallel on several CPU
+        threads (1: one cell per loop iteration; on 2 cores 8 measured slower than 1:
+        tools/solver_interleave.py).
     """
 
     serial_light_below: int = 200_000
@@ -164,12 +168,13 @@ class Performance:
     contacts_per_sphere: int = 8
     warm_slots: int = 16
     solver_interleave: int = 8
+    parallel_interleave: int = 1
 
     def __post_init__(self):
-        """ValueError naming the field: solver_interleave below 1."""
-        if self.solver_interleave < 1:
-            raise ValueError(f"tuning solver_interleave must be >= 1, "
-                             f"got {self.solver_interleave!r}")
+        """ValueError naming the field: solver_interleave or parallel_interleave below 1."""
+        for name in ("solver_interleave", "parallel_interleave"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"tuning {name} must be >= 1, got {getattr(self, name)!r}")
 
 
 @dataclasses.dataclass(frozen=True)

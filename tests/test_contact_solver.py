@@ -156,6 +156,7 @@ def test_over_relaxed_sweeps_hold_the_heavy_on_light_column(arch, precision):
 
 @pytest.mark.parametrize("name, value", [("relaxation", 2.0), ("relaxation", 0.0),
                                          ("solver_interleave", 0),
+                                         ("parallel_interleave", 0),
                                          ("contact_iterations", 0),
                                          ("position_iterations", 0), ("plain_sweeps", -1),
                                          ("shock_propagation", "always")])
@@ -301,7 +302,8 @@ def test_solver_conserves_momentum_without_walls(arch):
 def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     """The one-launch serial solver and the per-colour parallel launches (forced with
     serial_heavy_below = serial_solver_below = 0), each with one cell per sweep loop
-    iteration or several interleaved (Performance.solver_interleave), give the same
+    iteration or several interleaved (Performance.solver_interleave and
+    parallel_interleave), give the same
     state: an FCC block in a box, and layers on a grid with a third colour on two
     periodic axes; over-relaxed sweeps and their plain last sweeps the same way in
     both paths (with a cap of 15 sweeps, 10 of them plain, solves also stop inside
@@ -316,8 +318,8 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     out, sweeps = [], []
     for below, interleave in ((3000, 8), (0, 8), (3000, 1), (0, 3)):
         sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(
-            serial_heavy_below=below, serial_solver_below=below,
-            solver_interleave=interleave, **rules))
+            serial_heavy_below=below, serial_solver_below=below, solver_interleave=interleave,
+            parallel_interleave=interleave, **rules))
         counts = []
         while sim.time < seconds:
             sim.advance(sim.max_step())

@@ -112,10 +112,11 @@ class GaussSeidel:
     def sweep_colour(self, colour, mode: ti.template(), serial: ti.template(), omega):
         """One pass over the cells of one colour that own rows (disjoint blocks: no two
         threads touch a sphere), in list_active_cells order, k cells at a time with their
-        rows interleaved (sweep_cells; k: ContactSolver.interleave)."""
+        rows interleaved (sweep_cells; k: ContactSolver.interleave for serial sweeps,
+        interleave_parallel for parallel ones)."""
         start = self.colour_active[colour]
         end = self.colour_active[colour + 1]
-        k = ti.static(self.interleave)
+        k = ti.static(self.interleave if serial else self.interleave_parallel)
         ti.loop_config(serialize=serial, block_dim=ti.static(self.sweep_block))
         for u in range((end - start + k - 1) // k):
             self.sweep_cells(start + k * u, end, mode, omega, k)
