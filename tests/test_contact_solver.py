@@ -316,7 +316,10 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     if "sweeps" in case:
         rules.update(contact_iterations=15, position_iterations=15)
     out, sweeps = [], []
-    for below, interleave in ((3000, 8), (0, 8), (3000, 1), (0, 3)):
+    configs = ((3000, 8), (0, 8))
+    if "relaxation" not in case:       # the interleaving does not depend on the rules
+        configs += ((3000, 1), (0, 3))
+    for below, interleave in configs:
         sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(
             serial_heavy_below=below, serial_solver_below=below, solver_interleave=interleave,
             parallel_interleave=interleave, **rules))
