@@ -103,7 +103,7 @@ class GaussSeidel:
                 longest = ti.max(longest, hi[c] - lo[c])
         worst = ti.cast(0, self.real)
         for j in range(longest):
-            for c in ti.static(range(k)):
+            for c in range(k):
                 if lo[c] + j < hi[c]:
                     worst = ti.max(worst, self.solve_row(lo[c] + j, mode, omega))
         ti.atomic_max(self.residual[None], worst)
