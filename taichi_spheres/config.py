@@ -144,7 +144,7 @@ class Performance:
         sweeps one cell per thread): a row update waits on the previous one of its
         cell, and the processor overlaps the other cells' updates meanwhile.
     parallel_interleave: the same for sweeps running in parallel on several CPU
-        threads (1: one cell per loop iteration; on 2 cores 8 measured slower than 1:
+        threads (1: one cell per loop iteration; on 2 cores 8 measured no faster:
         tools/solver_interleave.py).
     """
 
