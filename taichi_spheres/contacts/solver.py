@@ -36,10 +36,11 @@ of the sphere for a wall row); cells of one colour have disjoint 2x2x2 blocks
 (grid.py), so one thread per cell sweeps its rows serially, in a fixed order
 (pairs by sphere ids, then wall rows: Box2D solves them last), with no races, and
 the result does not depend on the thread count (where the sweeps run on one CPU
-thread, it sweeps a few cells of a colour interleaved, the same bits: pgs.sweep_cells). Iterations stop when no row
-changed a velocity by more than ``Rules.contact_tolerance`` x the impact speed
-(or the positions by more than a tenth of ``Rules.overlap_tolerance`` of the
-smallest diameter), at most ``Rules.contact_iterations`` / ``position_iterations``.
+thread, it sweeps a few cells of a colour interleaved, the same bits:
+pgs.sweep_cells). Iterations stop when no row changed a velocity by more than
+``Rules.contact_tolerance`` x the impact speed (or the positions by more than a tenth
+of ``Rules.overlap_tolerance`` of the smallest diameter), at most
+``Rules.contact_iterations`` / ``position_iterations``.
 
 A mixin-free class over the engine's state, grid, parameters and pair geometry.
 """
@@ -105,15 +106,15 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         # parallel ones on a one-thread runtime, take Performance.solver_interleave,
         # parallel ones on several threads parallel_interleave; a GPU hides latency
         # with more threads instead
-        one_thread = ti.lang.impl.current_cfg().cpu_max_num_threads == 1
+        cfg = ti.lang.impl.current_cfg()
         self.interleave = self.perf.solver_interleave if cpu else 1
-        self.interleave_parallel = (self.interleave if one_thread else
+        self.interleave_parallel = (self.interleave if cfg.cpu_max_num_threads == 1 else
                                     self.perf.parallel_interleave) if cpu else 1
-        # loop iterations per task of a parallel sweep on the CPU: Taichi's 32 cells, as
-        # 32 / interleave iterations (a power of two), so that a colour still splits
-        # into as many tasks for the threads; a GPU keeps its default
-        self.sweep_block = 1 << max(0, (32 // self.interleave_parallel).bit_length() - 1) \
-            if cpu else None
+        # loop iterations per task of a parallel sweep on the CPU: as many cells as
+        # Taichi's default block (32), as block / interleave iterations (a power of
+        # two), so that a colour still splits into as many tasks; a GPU keeps its default
+        per_task = max(1, cfg.default_cpu_block_dim // self.interleave_parallel)
+        self.sweep_block = 1 << (per_task.bit_length() - 1) if cpu else None
         self.shock = shock_compiled(features, self.rules)
         self._allocate(state.capacity, grid.cell_capacity)
         self._build_kernels()
