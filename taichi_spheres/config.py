@@ -21,6 +21,13 @@ __all__ = ["Rules", "Performance", "Tuning", "DEFAULT"]
 SHOCK_MODES = ("auto", "on", "off")
 
 
+def _require_at_least(group, names, low) -> None:
+    """ValueError naming the first field of ``names`` in ``group`` below ``low``."""
+    for name in names:
+        if getattr(group, name) < low:
+            raise ValueError(f"tuning {name} must be >= {low}, got {getattr(group, name)!r}")
+
+
 @dataclasses.dataclass(frozen=True)
 class Rules:
     """Physics rules: impacts, persistent contacts, inelastic collapse (docs/design.md).
@@ -95,11 +102,8 @@ class Rules:
                              f"got {self.shock_propagation!r}")
         if not 0 < self.relaxation < 2:
             raise ValueError(f"tuning relaxation must be in (0, 2), got {self.relaxation!r}")
-        for name in ("contact_iterations", "position_iterations"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"tuning {name} must be >= 1, got {getattr(self, name)!r}")
-        if self.plain_sweeps < 0:
-            raise ValueError(f"tuning plain_sweeps must be >= 0, got {self.plain_sweeps!r}")
+        _require_at_least(self, ("contact_iterations", "position_iterations"), 1)
+        _require_at_least(self, ("plain_sweeps",), 0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -172,9 +176,7 @@ class Performance:
 
     def __post_init__(self):
         """ValueError naming the field: solver_interleave or parallel_interleave below 1."""
-        for name in ("solver_interleave", "parallel_interleave"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"tuning {name} must be >= 1, got {getattr(self, name)!r}")
+        _require_at_least(self, ("solver_interleave", "parallel_interleave"), 1)
 
 
 @dataclasses.dataclass(frozen=True)
