@@ -36,6 +36,19 @@ COMPILE_ENV = "TAICHI_SPHERES_COMPILE"
 #: rounds as written (IEEE 754), and the results depend only on the scene, precision
 #: and thread count (tests/test_same_bits.py). Cost at N = 1e5: docs/bench.md.
 FAST_MATH = False
+#: Taichi's make_thread_local (its default is True) gives each thread of a parallel
+#: loop a private copy of every global scalar the loop only adds to or takes the
+#: maximum into (the step's counters, the largest move and overlap), and every
+#: launched thread folds its copy into the global one at its end. On a GPU a loop
+#: whose bounds are read from a field is launched on a fixed, device-filling number of
+#: threads (~540,000 on an H200), so every such kernel paid ~540,000 contended atomics,
+#: ~3.5 ms, even with nothing to do (the resolve, re-detection and near-list kernels).
+#: Off on GPUs, only the iterations that count something touch the global scalars:
+#: a 10^4-sphere gas step on an H200 went from 76 to 4.4 ms with Taichi's kernel
+#: profiler on (``python tools/kernel_profile.py --gas 10000 --arch cuda``,
+#: docs/bench.md). The CPU keeps Taichi's default: its few threads fold a few copies,
+#: and its bits (tests/same_bits.json) stay as they are.
+GPU_THREAD_LOCAL = False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,13 +113,7 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
     mode = compile or (cur.compile if cur is not None else compile_mode_from_env())
     if arch == "metal" and want == "f64":
         raise ValueError("precision f64 is not available on Metal; use precision='f32'")
-    fp = ti.f64 if want == "f64" else ti.f32
-    kwargs = dict(arch=_taichi_arch(arch), default_fp=fp, default_ip=ti.i32,
-                  offline_cache=True, log_level=ti.WARN, random_seed=0,
-                  fast_math=FAST_MATH)
-    kwargs.update(COMPILE_MODES[mode])
-    if threads is not None:
-        kwargs["cpu_max_num_threads"] = threads
+    kwargs = init_options(arch, want, mode, threads)
     with contextlib.redirect_stdout(io.StringIO()):
         ti.init(**kwargs)    # (its "[Taichi] Starting on arch=..." line: Runtime.actual says it)
     actual = ti.lang.impl.current_cfg().arch.name
@@ -121,6 +128,21 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
     _current = Runtime(arch=arch, actual=actual, precision=want, threads=threads,
                        generation=_generation, compile=mode)
     return _current
+
+
+def init_options(arch: str, precision: str, mode: str, threads: int | None) -> dict:
+    """The ``ti.init`` keyword arguments of a runtime: arch, precision ("f32"/"f64"),
+    compile mode (COMPILE_MODES key), CPU threads (None: Taichi's default); FAST_MATH
+    off everywhere, GPU_THREAD_LOCAL on GPUs."""
+    kwargs = dict(arch=_taichi_arch(arch), default_fp=ti.f64 if precision == "f64" else ti.f32,
+                  default_ip=ti.i32, offline_cache=True, log_level=ti.WARN, random_seed=0,
+                  fast_math=FAST_MATH)
+    kwargs.update(COMPILE_MODES[mode])
+    if arch != "cpu":
+        kwargs["make_thread_local"] = GPU_THREAD_LOCAL
+    if threads is not None:
+        kwargs["cpu_max_num_threads"] = threads
+    return kwargs
 
 
 #: The loop nest of probe_loops: parallel iterations x rows x spheres per row.

@@ -82,6 +82,21 @@ def test_fast_math_stays_off():
     assert runtime.FAST_MATH is False
 
 
+def test_thread_local_copies_only_on_the_cpu():
+    """On a GPU, thread-local copies of the step's counters make every launched thread
+    (a device-filling number for loops with bounds read from fields) fold its copy into
+    the counter: ms per kernel (runtime.GPU_THREAD_LOCAL). The CPU keeps Taichi's
+    default, with which the stored digests were made."""
+    cpu = runtime.init_options("cpu", "f64", "fast", 2)
+    assert "make_thread_local" not in cpu
+    assert cpu["fast_math"] is False and cpu["cpu_max_num_threads"] == 2
+    assert cpu["advanced_optimization"] is False
+    for gpu in ("cuda", "gpu", "vulkan"):
+        opts = runtime.init_options(gpu, "f32", "optimized", None)
+        assert opts["make_thread_local"] is False and opts["fast_math"] is False
+        assert "cpu_max_num_threads" not in opts
+
+
 def test_simulations_share_an_engine_and_keep_their_bits(arch, precision):
     """A later Simulation with the same compiled features and no more spheres runs on
     the earlier one's engine (compiles nothing: tools/compile_once.py), also when both

@@ -31,6 +31,7 @@ columns, warm starting, and a large lattice bed held on 1 and 2 threads.
 
     python tools/contact_solver.py --write            # ~20-25 min on 2 cores
     python tools/contact_solver.py --quick            # smaller, no write
+    python tools/contact_solver.py --beds-only --arch cuda --write   # the bed on a GPU
 """
 from __future__ import annotations
 
@@ -53,7 +54,7 @@ import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.builders import ball_on_block, fcc_block  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from taichi_spheres.simulation import DEFAULT_STEP_FRACTION  # noqa: E402
-from machine import cpu_name, publish, untimed_pass  # noqa: E402  (tools/machine.py)
+from machine import cpu_name, gpu_name, publish, untimed_pass  # noqa: E402  (tools/machine.py)
 
 G = 9.81
 
@@ -215,10 +216,13 @@ def fcc_bed(n_target: int, layers: int = 5):
     return fcc_block((side_cells, side_cells, layers), radius=0.01, restitution=0.5, gravity=G)
 
 
-def bed_child(n_target: int, hold: float, settings: str, settle: float = 0.5) -> dict:
-    """Settle ``settle`` s, then hold ``hold`` s (this process's threads; SETTINGS[settings])."""
+def bed_child(n_target: int, hold: float, settings: str, settle: float = 0.5,
+              arch: str = "cpu") -> dict:
+    """Settle ``settle`` s, then hold ``hold`` s (on ``arch``, f64, this process's threads;
+    SETTINGS[settings])."""
     scene = fcc_bed(n_target)
-    sim = ts.Simulation(scene, tuning=Tuning().with_(**SETTINGS[settings]))
+    sim = ts.Simulation(scene, arch=arch, precision="f64",
+                        tuning=Tuning().with_(**SETTINGS[settings]))
     sim.advance(settle)
     wall, c = window(sim, settle + hold)
     st = sim.state()
@@ -228,12 +232,48 @@ def bed_child(n_target: int, hold: float, settings: str, settle: float = 0.5) ->
                 steps=c["steps"], residual=sim.stats["contact_residual"])
 
 
-def bed(n_target, hold, threads, settings="defaults"):
-    """bed_child in a child process with ``threads`` CPU threads."""
-    out = subprocess.run([sys.executable, __file__, "--child-bed", str(n_target), str(hold),
-                          settings, "--threads", str(threads)], capture_output=True, text=True,
-                         check=True)
+def bed(n_target, hold, threads, settings="defaults", arch="cpu", timeout=None):
+    """bed_child in a child process on ``arch`` with ``threads`` CPU threads (None: the
+    arch's default; on a GPU the threads only launch its kernels); with ``timeout`` [s],
+    {"timeout": timeout} if the child has not finished by then."""
+    cmd = [sys.executable, __file__, "--child-bed", str(n_target), str(hold), settings,
+           "--arch", arch] + (["--threads", str(threads)] if threads else [])
+    try:
+        out = subprocess.run(cmd, capture_output=True, text=True, check=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"timeout": timeout}
     return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def beds_table(args, beds) -> list:
+    """The FCC bed rows (markdown lines) of the report."""
+    lines = [f"FCC bed: a flat lattice block (10 sphere layers, r = 0.01 m) in a box that "
+             f"fits it on x and y, settled 0.5 s, then held {args.bed_time:g} s; "
+             "Performance defaults (serial sweeps below 30,000 spheres, else one "
+             "parallel launch per sweep).", "",
+             "| FCC bed held | threads | settings | wall s per simulated s | "
+             "steps | velocity sweeps per step | largest speed [m/s] | overlap / diameter |",
+             "|---|---|---|---|---|---|---|---|"]
+    for (t, name), b in beds.items():
+        where = t if t else args.arch.upper()
+        label = "defaults (shock propagation off: equal masses)" if name == "defaults" else name
+        if "timeout" in b:
+            lines.append(f"| about {args.bed_n} spheres | {where} | {label} | not done in "
+                         f"{b['timeout']:g} s (settling included) | | | | |")
+            continue
+        lines.append(f"| {b['n']} spheres | {where} | {label} | "
+                     f"{b['wall_per_s']:.2f} | {b['steps']} | "
+                     f"{b['sweeps']:.1f} | {b['vmax']:.2e} | {b['overlap']:.2e} |")
+    return lines
+
+
+def beds_report(args, beds) -> str:
+    """The section of --beds-only: the FCC bed on args.arch, with its hardware."""
+    hw = (gpu_name() or args.arch) if args.arch != "cpu" else f"{cpu_name()}, threads as given"
+    cmd = " ".join(["python tools/contact_solver.py --beds-only --arch", args.arch,
+                    "--bed-n", str(args.bed_n), "--write"])
+    return "\n".join([f"{datetime.date.today()}, {hw}, f64: `{cmd}`.", ""]
+                     + beds_table(args, beds)) + "\n"
 
 
 def report(args, p, cols, warm, beds, capped, balls) -> str:
@@ -285,18 +325,7 @@ def report(args, p, cols, warm, beds, capped, balls) -> str:
                      f"{c['phase_overlap']:.2e} | {c['ke']:.2e} | {c['growth']:.1e} |")
     lines.append("")
     if beds:
-        lines += [f"FCC bed: a flat lattice block (10 sphere layers, r = 0.01 m) in a box that "
-                  f"fits it on x and y, settled 0.5 s, then held {args.bed_time:g} s; "
-                  "Performance defaults (serial sweeps below 30,000 spheres, else one "
-                  "parallel launch per sweep).", "",
-                  "| FCC bed held | threads | settings | wall s per simulated s | "
-                  "steps | velocity sweeps per step | largest speed [m/s] | overlap / diameter |",
-                  "|---|---|---|---|---|---|---|---|"]
-        for (t, name), b in beds.items():
-            lines.append(f"| {b['n']} spheres | {t} | "
-                         f"{'defaults (shock propagation off: equal masses)' if name == 'defaults' else name} | "
-                         f"{b['wall_per_s']:.2f} | {b['steps']} | "
-                         f"{b['sweeps']:.1f} | {b['vmax']:.2e} | {b['overlap']:.2e} |")
+        lines += beds_table(args, beds)
     return "\n".join(lines) + "\n"
 
 
@@ -308,13 +337,30 @@ def main(argv=None):
     ap.add_argument("--bed-time", type=float, default=0.3)
     ap.add_argument("--quick", action="store_true", help="0.3/0.6 s pour, 4,000-sphere bed")
     ap.add_argument("--write", action="store_true", help="write into docs/bench.md")
-    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--threads", type=int, default=None, help="CPU threads (default 1)")
+    ap.add_argument("--arch", default="cpu", help="cpu, or a GPU arch (cuda) for --beds-only")
+    ap.add_argument("--beds-only", action="store_true",
+                    help="only the FCC bed (on the CPU: 1 and 2 threads; on a GPU: once), "
+                         "written to the section fcc-bed-ARCH")
+    ap.add_argument("--child-timeout", type=float, default=None,
+                    help="--beds-only: seconds each bed may take (settling included)")
     ap.add_argument("--child-bed", nargs=3, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    ts.runtime.ensure("cpu", "f64", args.threads)
+    if args.arch != "cpu" and not (args.beds_only or args.child_bed):
+        ap.error("--arch other than cpu needs --beds-only")
+    ts.runtime.ensure(args.arch, "f64", args.threads or (1 if args.arch == "cpu" else None))
     if args.child_bed:
         print(json.dumps(bed_child(int(args.child_bed[0]), float(args.child_bed[1]),
-                                   args.child_bed[2])))
+                                   args.child_bed[2], arch=args.arch)))
+        return 0
+    if args.beds_only:
+        beds = {}
+        for name in ("defaults", FAST, "shock propagation on"):
+            for t in (1, 2) if args.arch == "cpu" else (None,):
+                beds[t, name] = bed(args.bed_n, args.bed_time, t, name, args.arch,
+                                    args.child_timeout)
+                print(t, name, beds[t, name], flush=True)
+        publish(beds_report(args, beds), f"fcc-bed-{args.arch}", args.write)
         return 0
     if args.quick:
         args.phases, args.bed_n = (0.3, 0.6), 4000

@@ -19,6 +19,7 @@ flight.
 
     python tools/kernel_profile.py --scene scenes/pour.toml --at 1.0 --window 0.2
     python tools/kernel_profile.py --silo --write
+    python tools/kernel_profile.py --gas 10000 --arch cuda --window 0.02 --host
 """
 from __future__ import annotations
 
@@ -37,7 +38,7 @@ from taichi.profiler.kernel_profiler import get_default_kernel_profiler  # noqa:
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres import runtime  # noqa: E402
-from machine import cpu_name, publish, untimed_pass  # noqa: E402
+from machine import cpu_name, gpu_name, publish, untimed_pass  # noqa: E402
 
 
 def silo_simulation():
@@ -73,7 +74,9 @@ def profile(sim, window: float) -> dict:
 
 def report(args, label, p) -> str:
     total = sum(t for t, _ in p["kernels"].values())
-    lines = [f"Measured {datetime.date.today()} on {cpu_name()}, 1 thread: "
+    hw = (f"{cpu_name()}, 1 thread" if args.arch == "cpu"
+          else f"{gpu_name() or args.arch}, {args.precision}")
+    lines = [f"Measured {datetime.date.today()} on {hw}: "
              f"`python tools/kernel_profile.py {' '.join(a for a in sys.argv[1:] if a != '--write')}`",
              "",
              f"{label}: {p['steps']} steps in {args.window} s, {1e3 * p['wall'] / p['steps']:.2f} "
@@ -94,21 +97,47 @@ def main(argv=None):
     ap.add_argument("--silo", action="store_true")
     ap.add_argument("--window", type=float, default=0.1)
     ap.add_argument("--top", type=int, default=8)
+    ap.add_argument("--gas", type=int, default=0,
+                    help="the gas of tools/bench.py with this many spheres (packing 0.3)")
+    ap.add_argument("--arch", default="cpu", help="cpu (1 thread) or a GPU arch (cuda)")
+    ap.add_argument("--precision", default="f64", choices=["f64", "f32"])
+    ap.add_argument("--host", action="store_true",
+                    help="also profile the Python side of the window (cProfile, top 15)")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args(argv)
-    if not args.silo and args.scene is None:
-        ap.error("give --scene TOML or --silo")
+    if not (args.silo or args.gas) and args.scene is None:
+        ap.error("give --scene TOML, --gas N or --silo")
     for mode in runtime.COMPILE_MODES.values():
         mode["kernel_profiler"] = True
-    runtime.ensure("cpu", "f64", threads=1)
+    threads = 1 if args.arch == "cpu" else None
+    runtime.ensure(args.arch, args.precision, threads=threads)
     if args.silo:
         sim, label, section = silo_simulation(), "Silo discharge (tools/peer_lammps_silo.py's)", "profile-silo"
+    elif args.gas:
+        from taichi_spheres.builders import gas
+        sim = ts.Simulation(gas(args.gas, packing=0.3, periodic=True, seed=0), arch=args.arch,
+                            precision=args.precision, threads=threads)
+        label, section = f"Gas of {args.gas} spheres (tools/bench.py's)", f"profile-gas-{args.arch}"
     else:
-        sim = ts.Simulation(ts.load_scene(args.scene), threads=1)
+        sim = ts.Simulation(ts.load_scene(args.scene), arch=args.arch,
+                            precision=args.precision, threads=threads)
         sim.advance_to(args.at)
         name = os.path.splitext(os.path.basename(args.scene))[0]
         label, section = f"`{args.scene}` from t = {args.at} s", f"profile-{name}"
+    if args.arch != "cpu":
+        section += "" if section.endswith(args.arch) else f"-{args.arch}"
     publish(report(args, label, profile(sim, args.window)), section, args.write)
+    if args.host:
+        host_profile(sim, args.window)
+
+
+def host_profile(sim, window: float) -> None:
+    """Print where the Python side of ``window`` s of ``sim`` spends its time."""
+    import cProfile
+    import pstats
+    prof = cProfile.Profile()
+    prof.runcall(sim.advance, window)
+    pstats.Stats(prof).sort_stats("cumulative").print_stats(15)
 
 
 if __name__ == "__main__":

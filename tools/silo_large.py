@@ -15,6 +15,7 @@ discharged, the largest overlap.
     python tools/silo_large.py                          # 10^5 spheres, 1 and 2 threads
     python tools/silo_large.py --count 20000 --threads 2 --no-write
     python tools/silo_large.py --write                  # the 'silo-large' section of docs/bench.md
+    python tools/silo_large.py --arch cuda --write      # on a GPU: section 'silo-large-cuda'
 """
 from __future__ import annotations
 
@@ -34,7 +35,7 @@ sys.path.insert(0, HERE)
 
 import taichi_spheres as ts  # noqa: E402
 import silo  # noqa: E402  (tools/silo.py)
-from machine import cpu_name, untimed_pass, write_section  # noqa: E402
+from machine import cpu_name, gpu_name, untimed_pass, write_section  # noqa: E402
 
 
 def fill_height(count, radius, silo_radius) -> float:
@@ -45,7 +46,9 @@ def fill_height(count, radius, silo_radius) -> float:
 
 
 def run(a, threads) -> dict:
-    """One discharge on ``threads`` threads (module docstring)."""
+    """One discharge on ``a.arch`` with ``threads`` CPU threads (module docstring; None on
+    a GPU, where the threads only launch kernels)."""
+    ts.runtime.ensure(a.arch, "f64", threads)
     settings = types.SimpleNamespace(silo_radius=a.silo_radius, radius=a.radius, mu=0.5,
                                      fill=fill_height(a.count, a.radius, a.silo_radius))
     c = a.silo_radius + 0.005
@@ -55,12 +58,12 @@ def run(a, threads) -> dict:
     state = None
     if a.settle > 0:
         closed = ts.Simulation(silo.silo_scene(x, np.zeros_like(x), None, settings, None),
-                               threads=threads)
+                               arch=a.arch, threads=threads)
         closed.advance(a.settle)
         st = closed.state()
         state = (st.x, st.v, st.omega)
     sim = ts.Simulation(silo.silo_scene(x, np.zeros_like(x), None, settings, hole),
-                        threads=threads)
+                        arch=a.arch, threads=threads)
     if state is not None:
         sim.set_state(*state[:2], omega=state[2])
     sim.advance(0.01)
@@ -75,11 +78,12 @@ def run(a, threads) -> dict:
                 rows=(s["contacts"] - s0["contacts"]) / max(steps, 1),
                 sweeps=(s["contact_iterations"] - s0["contact_iterations"]) / max(steps, 1),
                 discharged=s["discharged"], overlap=s["max_overlap"],
-                arch=sim.runtime.arch if hasattr(sim, "runtime") else "cpu")
+                arch=a.arch)
 
 
 def report(rows, argv, a) -> str:
-    lines = [f"Measured {datetime.date.today()} on {cpu_name()}: "
+    hw = cpu_name() if a.arch == "cpu" else (gpu_name() or a.arch)
+    lines = [f"Measured {datetime.date.today()} on {hw}, f64: "
              f"`python tools/silo_large.py {' '.join(argv)}`".rstrip(), "",
              f"{rows[0]['n']} spheres of d = {2e3 * a.radius:g} mm in a silo of radius "
              f"{1e3 * a.silo_radius:g} mm, orifice D = {a.orifice:g} d; "
@@ -89,7 +93,7 @@ def report(rows, argv, a) -> str:
              "| threads | wall s / sim s | steps | rows / step | sweeps / step | "
              "discharged | max overlap / d |", "|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['threads']} | {r['wall_per_sim']:.0f} | {r['steps']} | "
+        lines.append(f"| {r['threads'] or a.arch.upper()} | {r['wall_per_sim']:.{0 if r['wall_per_sim'] >= 100 else 2}f} | {r['steps']} | "
                      f"{r['rows']:.0f} | {r['sweeps']:.0f} | {r['discharged']} | "
                      f"{r['overlap']:.1e} |")
     return "\n".join(lines)
@@ -104,18 +108,22 @@ def main(argv=None):
     p.add_argument("--orifice", type=float, default=8.0, help="orifice diameter / d")
     p.add_argument("--settle", type=float, default=0.0, help="[s], orifice closed")
     p.add_argument("--duration", type=float, default=0.02, help="timed discharge [s]")
-    p.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    p.add_argument("--threads", type=int, nargs="+", default=None,
+                   help="CPU thread counts (default 1 2; ignored on a GPU)")
+    p.add_argument("--arch", default="cpu", help="cpu or a GPU arch (cuda)")
     p.add_argument("--write", action="store_true")
     p.add_argument("--no-write", dest="write", action="store_false")
     a = p.parse_args(argv)
     rows = []
+    a.threads = (a.threads or [1, 2]) if a.arch == "cpu" else [None]
     for threads in a.threads:
         rows.append(run(a, threads))
         print(rows[-1], flush=True)
     text = report(rows, [s for s in argv if s != "--write"], a)
     print(text)
     if a.write:
-        write_section(os.path.join(HERE, "..", "docs", "bench.md"), "silo-large", text)
+        name = "silo-large" if a.arch == "cpu" else f"silo-large-{a.arch}"
+        write_section(os.path.join(HERE, "..", "docs", "bench.md"), name, text)
 
 
 if __name__ == "__main__":
