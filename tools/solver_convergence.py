@@ -13,6 +13,9 @@ numpy:
   velocities after the engine's own sweeps match the engine's to round-off), also
   over-relaxed (Rules.relaxation 1.5 and 1.8) and in other row orders (by height from
   the floor up or from the top down, and symmetric forward-backward sweeps);
+- the same sweeps accelerated by NNCG, the nonsmooth nonlinear conjugate gradient
+  method (Silcowitz, Niebe & Erleben 2010): a Fletcher-Reeves step along the
+  impulse changes of the previous sweeps after each sweep;
 - APGD, Nesterov-accelerated projected gradient descent with adaptive restart and
   backtracking (Mazhar, Heyn, Negrut, Tasora 2015, "Using Nesterov's method to
   accelerate multibody dynamics with friction and contact", ACM TOG 34(3)), from the
@@ -98,6 +101,7 @@ class Problem:
         self.im = p["inv_mass"]
         self.N = len(p["v"])
         self.v_free = p["v"] - self.scatter(p["lam"])
+        self.lists = tuple(p[k].tolist() for k in ("a", "b", "normal", "meff", "target"))
         self.linear = self.gather(self.v_free) - p["target"]     # J v_free - target
 
     def scatter(self, lam):
@@ -130,38 +134,83 @@ class Problem:
         return float(np.max(np.abs(lam - np.maximum(lam - g, 0.0))))
 
 
+def sweep_rows(prob: Problem, lam_l: list, vl: list, order, omega: float = 1.0) -> None:
+    """One sweep of contacts/pgs.py's row update over the rows in ``order``, in place on
+    the impulses lam_l and the sphere velocities vl (Python lists: fast per row)."""
+    p = prob.p
+    a, b, n, meff, tgt = prob.lists
+    im = prob.im
+    for s in order:
+        ai, bi, ns = a[s], b[s], n[s]
+        va = vl[ai]
+        if bi >= 0:
+            vb = vl[bi]
+            un = (va[0] - vb[0]) * ns[0] + (va[1] - vb[1]) * ns[1] + (va[2] - vb[2]) * ns[2]
+        else:
+            un = va[0] * ns[0] + va[1] * ns[1] + va[2] * ns[2]
+        old = lam_l[s]
+        new = max(old + omega * meff[s] * (tgt[s] - un), 0.0)
+        lam_l[s] = new
+        dl = new - old
+        ca = dl * im[ai]
+        vl[ai] = [va[0] + ca * ns[0], va[1] + ca * ns[1], va[2] + ca * ns[2]]
+        if bi >= 0:
+            cb = dl * im[bi]
+            vb = vl[bi]
+            vl[bi] = [vb[0] - cb * ns[0], vb[1] - cb * ns[1], vb[2] - cb * ns[2]]
+
+
 def pgs(prob: Problem, sweeps: list[int], omega: float = 1.0, orders=None) -> dict:
     """contacts/pgs.py's velocity sweeps (over-relaxation ``omega``, Rules.relaxation),
     sweep k visiting the rows in ``orders[k % len(orders)]`` (default: the engine's
     order); velocities after each requested number of sweeps."""
     p = prob.p
     orders = [p["order"]] if orders is None else orders
-    a, b, n, meff, tgt = (p[k].tolist() for k in ("a", "b", "normal", "meff", "target"))
+    orders = [o.tolist() for o in orders]
     lam_l = p["lam"].tolist()
-    im = prob.im
     vl = p["v"].tolist()
     out = {}
     for k in range(1, max(sweeps) + 1):
-        for s in orders[(k - 1) % len(orders)].tolist():
-            ai, bi, ns = a[s], b[s], n[s]
-            va = vl[ai]
-            if bi >= 0:
-                vb = vl[bi]
-                un = (va[0] - vb[0]) * ns[0] + (va[1] - vb[1]) * ns[1] + (va[2] - vb[2]) * ns[2]
-            else:
-                un = va[0] * ns[0] + va[1] * ns[1] + va[2] * ns[2]
-            old = lam_l[s]
-            new = max(old + omega * meff[s] * (tgt[s] - un), 0.0)
-            lam_l[s] = new
-            dl = new - old
-            ca = dl * im[ai]
-            vl[ai] = [va[0] + ca * ns[0], va[1] + ca * ns[1], va[2] + ca * ns[2]]
-            if bi >= 0:
-                cb = dl * im[bi]
-                vb = vl[bi]
-                vl[bi] = [vb[0] - cb * ns[0], vb[1] - cb * ns[1], vb[2] - cb * ns[2]]
+        sweep_rows(prob, lam_l, vl, orders[(k - 1) % len(orders)], omega)
         if k in sweeps:
             out[k] = np.array(vl)
+    return out
+
+
+def nncg(prob: Problem, sweeps: list[int]) -> dict:
+    """The nonsmooth nonlinear conjugate gradient method (Silcowitz, Niebe & Erleben
+    2010, "A nonsmooth nonlinear conjugate gradient method for interactive contact
+    force problems", The Visual Computer 26): the engine's sweep is the nonlinear map,
+    its change of the impulses -r_k the (negative) gradient, and each sweep after the
+    first adds beta_k p_{k-1} with beta_k = |r_k|^2 / |r_{k-1}|^2 (Fletcher-Reeves;
+    restart, p = 0, when beta_k > 1), p_k = beta_k p_{k-1} - r_k. Velocities after
+    each requested number of sweeps (each sweep also pays a pass over the rows that
+    applies beta_k p_{k-1})."""
+    p = prob.p
+    order = p["order"].tolist()
+    lam = p["lam"].astype(np.float64).copy()
+    v = p["v"].astype(np.float64).copy()
+    direction, last = np.zeros_like(lam), None
+    out = {}
+    for k in range(1, max(sweeps) + 1):
+        lam_l, vl = lam.tolist(), v.tolist()
+        sweep_rows(prob, lam_l, vl, order)
+        new, v = np.array(lam_l), np.array(vl)
+        r = lam - new                      # the gradient of the nonlinear map
+        lam = new
+        rr = float(r @ r)
+        if last is None:
+            direction = -r
+        elif rr > last:                    # beta > 1: restart
+            direction = np.zeros_like(lam)
+        else:
+            step = (rr / last) * direction
+            lam = lam + step
+            v = v + prob.scatter(step)
+            direction = step - r
+        last = rr
+        if k in sweeps:
+            out[k] = v.copy()
     return out
 
 
@@ -266,6 +315,9 @@ def main(argv=None):
         by = pgs(prob, args.variant_sweeps, orders=orders)
         variant_rows += [(name, k, errors(by[k], truth, p["h"], p["d"]))
                          for k in args.variant_sweeps]
+    by = nncg(prob, args.variant_sweeps)
+    variant_rows += [("accelerated by NNCG (one pass over the rows more per sweep)", k,
+                      errors(by[k], truth, p["h"], p["d"])) for k in args.variant_sweeps]
     _, kept = apgd(prob, max(args.apgd), keep=set(args.apgd))
     apgd_rows = [(k, (kept[k][1], errors(kept[k][0], truth, p["h"], p["d"]))) for k in args.apgd]
     publish(report(args, p, res_true, pgs_rows, apgd_rows, check, variant_rows),
