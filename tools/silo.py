@@ -79,9 +79,11 @@ def silo_scene(x, v, omega, a, hole, radius=None):
 
 def engine_options(a) -> dict:
     """Simulation keywords of the command line: threads, step_fraction, the contact
-    solver's velocity and position sweep caps (None: the defaults) and its shock
-    propagation pass."""
+    solver's velocity and position sweep caps and over-relaxation (None: the defaults)
+    and its shock propagation pass."""
     tuning = Tuning()
+    if a.relaxation is not None:
+        tuning = tuning.with_(relaxation=a.relaxation)
     if a.sweeps is not None:
         tuning = tuning.with_(contact_iterations=a.sweeps)
     if a.position_sweeps is not None:
@@ -174,6 +176,8 @@ def parse(argv=None):
                    help="the contact solver's velocity sweep cap (default: Rules')")
     p.add_argument("--position-sweeps", type=int, default=None,
                    help="the contact solver's position sweep cap (default: Rules')")
+    p.add_argument("--relaxation", type=float, default=None,
+                   help="the contact solver's over-relaxation (default: Rules')")
     p.add_argument("--shock", action="store_true",
                    help="switch on the contact solver's shock propagation pass")
     p.add_argument("--write", action="store_true", help="write docs/granular.md's section")
