@@ -182,6 +182,10 @@ FAST = "relaxation 1.8, 40 / 40 sweeps, shock propagation on"
 RELAXED_BEDS = dict(relaxation=1.8, contact_iterations=70, position_iterations=50)
 RELAXED = "relaxation 1.8, 70 / 50 sweeps"
 
+#: --bed-settings: short names of the FCC bed rows' settings
+BED_SETTINGS = {"defaults": "defaults", "fast": FAST, "shock": "shock propagation on",
+                "relaxed": RELAXED}
+
 #: the settings of the heavy-ball rows and of the FCC bed rows, by name
 SETTINGS = {"defaults": {}, "relaxation 1.8": dict(relaxation=1.8),
             RELAXED: RELAXED_BEDS,
@@ -277,7 +281,8 @@ def beds_report(args, beds) -> str:
     """The section of --beds-only: the FCC bed on args.arch, with its hardware."""
     hw = (gpu_name() or args.arch) if args.arch != "cpu" else f"{cpu_name()}, threads as given"
     cmd = " ".join(["python tools/contact_solver.py --beds-only --arch", args.arch,
-                    "--bed-n", str(args.bed_n), "--write"])
+                    "--bed-n", str(args.bed_n), "--bed-settings", *args.bed_settings,
+                    "--write"])
     return "\n".join([f"{datetime.date.today()}, {hw}, f64: `{cmd}`.", ""]
                      + beds_table(args, beds)) + "\n"
 
@@ -347,7 +352,10 @@ def main(argv=None):
     ap.add_argument("--arch", default="cpu", help="cpu, or a GPU arch (cuda) for --beds-only")
     ap.add_argument("--beds-only", action="store_true",
                     help="only the FCC bed (on the CPU: 1 and 2 threads; on a GPU: once), "
-                         "written to the section fcc-bed-ARCH")
+                         "written to the section fcc-bed-ARCH-SETTINGS")
+    ap.add_argument("--bed-settings", nargs="+", choices=list(BED_SETTINGS),
+                    default=["defaults", "fast", "shock"],
+                    help="--beds-only: which settings (fast: FAST_BEDS, relaxed: RELAXED_BEDS)")
     ap.add_argument("--child-timeout", type=float, default=None,
                     help="--beds-only: seconds each bed may take (settling included)")
     ap.add_argument("--child-bed", nargs=3, default=None, help=argparse.SUPPRESS)
@@ -361,12 +369,13 @@ def main(argv=None):
         return 0
     if args.beds_only:
         beds = {}
-        for name in ("defaults", FAST, "shock propagation on"):
+        for name in (BED_SETTINGS[key] for key in args.bed_settings):
             for t in (1, 2) if args.arch == "cpu" else (None,):
                 beds[t, name] = bed(args.bed_n, args.bed_time, t, name, args.arch,
                                     args.child_timeout)
                 print(t, name, beds[t, name], flush=True)
-        publish(beds_report(args, beds), f"fcc-bed-{args.arch}", args.write)
+        publish(beds_report(args, beds), "-".join(["fcc-bed", args.arch, *args.bed_settings]),
+                args.write)
         return 0
     if args.quick:
         args.phases, args.bed_n = (0.3, 0.6), 4000

@@ -30,7 +30,7 @@ wants bench && timeout "${BENCH_S:-130}" $py tools/bench.py --arch cuda --sizes 
 echo "bench rc $? ($parts)" >>"$dir/machine.txt"
 
 wants beds && timeout "${BEDS_S:-140}" $py tools/contact_solver.py --beds-only --arch cuda \
-    --child-timeout 60 --write >"$dir/beds.log" 2>&1
+    --bed-settings defaults relaxed fast --child-timeout 60 --write >"$dir/beds.log" 2>&1
 echo "beds rc $?" >>"$dir/machine.txt"
 
 wants silo && timeout "${SILO_S:-80}" $py tools/silo_large.py --arch cuda --duration 0.05 --write \
