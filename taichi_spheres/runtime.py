@@ -45,9 +45,11 @@ FAST_MATH = False
 #: ~3.5 ms, even with nothing to do (the resolve, re-detection and near-list kernels).
 #: Off on GPUs, only the iterations that count something touch the global scalars:
 #: a 10^4-sphere gas step on an H200 went from 76 to 4.4 ms with Taichi's kernel
-#: profiler on (``python tools/kernel_profile.py --gas 10000 --arch cuda``,
-#: docs/bench.md). The CPU keeps Taichi's default: its few threads fold a few copies,
-#: and its bits (tests/same_bits.json) stay as they are.
+#: profiler on (``python tools/kernel_profile.py --gas 10000 --arch cuda --window
+#: 0.1``, docs/bench.md). Vulkan and Metal launch such loops on a fixed number of
+#: threads too and get the same setting (not measured there). The CPU keeps Taichi's
+#: default: its few threads fold a few copies, and its bits (tests/same_bits.json) stay
+#: as they are.
 GPU_THREAD_LOCAL = False
 
 

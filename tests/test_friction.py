@@ -101,7 +101,8 @@ def test_sphere_on_incline(arch, precision, degrees):
 @pytest.mark.parametrize("beta0, w1", [(0.44, (0, 0, 0)), (0.44, (0, 400, -100)),
                                        (-1.0, (0, 0, 0))])
 def test_oblique_pair_impact_follows_walton(arch, beta0, w1):
-    """Two glass spheres (e, mu, beta0 of Foerster et al. 1994) meeting obliquely, in the
+    """Two glass spheres (e, mu, beta0 of Foerster et al. 1994, as docs/granular.md lists
+    them) meeting obliquely, in the
     sticking and sliding (large spin) regimes: velocities and spins after the impact
     equal Walton's closed form, and the total angular momentum (orbital + spin) is
     conserved, to round-off."""

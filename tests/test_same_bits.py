@@ -87,10 +87,11 @@ def test_thread_local_copies_only_on_the_cpu():
     (a device-filling number for loops with bounds read from fields) fold its copy into
     the counter: ms per kernel (runtime.GPU_THREAD_LOCAL). The CPU keeps Taichi's
     default, with which the stored digests were made."""
+    import taichi as ti
     cpu = runtime.init_options("cpu", "f64", "fast", 2)
-    assert "make_thread_local" not in cpu
-    assert cpu["fast_math"] is False and cpu["cpu_max_num_threads"] == 2
-    assert cpu["advanced_optimization"] is False
+    assert cpu == dict(arch=ti.cpu, default_fp=ti.f64, default_ip=ti.i32, offline_cache=True,
+                       log_level=ti.WARN, random_seed=0, fast_math=False,
+                       advanced_optimization=False, cpu_max_num_threads=2)
     for gpu in ("cuda", "gpu", "vulkan"):
         opts = runtime.init_options(gpu, "f32", "optimized", None)
         assert opts["make_thread_local"] is False and opts["fast_math"] is False

@@ -53,3 +53,34 @@ def test_kernel_profile_needs_a_run_to_profile(capsys):
     with pytest.raises(SystemExit):
         kernel_profile.main(["--arch", "cuda"])
     assert "--gas N" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--arch", "cuda", "--beds-only", "--threads", "2"], "--threads sets CPU threads"),
+    (["--threads", "0"], "--threads must be at least 1"),
+    (["--beds-only", "--child-timeout", "0"], "--child-timeout must be > 0"),
+    (["--bed-settings", "relaxed"], "go with --beds-only"),
+    (["--beds-only", "--quick"], "--quick does not go with --beds-only"),
+    (["--arch", "cdua", "--beds-only"], "invalid choice: 'cdua'"),
+])
+def test_contact_solver_options_that_do_not_go_together(capsys, argv, words):
+    with pytest.raises(SystemExit):
+        contact_solver.main(argv)
+    assert words in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--silo", "--arch", "cuda"], "--silo runs on the CPU in f64"),
+    (["--gas", "100", "--silo"], "give one of"),
+    (["--gas", "-5"], "--gas must be a positive"),
+])
+def test_kernel_profile_options_that_do_not_go_together(capsys, argv, words):
+    with pytest.raises(SystemExit):
+        kernel_profile.main(argv)
+    assert words in capsys.readouterr().err
+
+
+def test_silo_large_takes_threads_on_the_cpu_only(capsys):
+    with pytest.raises(SystemExit):
+        silo_large.main(["--arch", "cuda", "--threads", "2"])
+    assert "only with --arch cpu" in capsys.readouterr().err

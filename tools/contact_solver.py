@@ -340,6 +340,25 @@ def report(args, p, cols, warm, beds, capped, balls) -> str:
     return "\n".join(lines) + "\n"
 
 
+def check_args(ap, args) -> None:
+    """Usage errors (ap.error) for options out of range or that do not go together."""
+    if args.threads is not None and args.threads < 1:
+        ap.error(f"--threads must be at least 1, got {args.threads}")
+    if args.arch != "cpu" and args.threads is not None:
+        ap.error(f"--threads sets CPU threads; not with --arch {args.arch}")
+    if args.child_bed:
+        return
+    if args.arch != "cpu" and not args.beds_only:
+        ap.error("--arch other than cpu needs --beds-only")
+    if args.child_timeout is not None and not args.child_timeout > 0:
+        ap.error(f"--child-timeout must be > 0 s, got {args.child_timeout}")
+    if not args.beds_only and (args.child_timeout is not None
+                               or args.bed_settings != ap.get_default("bed_settings")):
+        ap.error("--bed-settings and --child-timeout go with --beds-only")
+    if args.beds_only and args.quick:
+        ap.error("--quick does not go with --beds-only (give --bed-n)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scene", default="scenes/pour.toml")
@@ -349,7 +368,8 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="0.3/0.6 s pour, 4,000-sphere bed")
     ap.add_argument("--write", action="store_true", help="write into docs/bench.md")
     ap.add_argument("--threads", type=int, default=None, help="CPU threads (default 1)")
-    ap.add_argument("--arch", default="cpu", help="cpu, or a GPU arch (cuda) for --beds-only")
+    ap.add_argument("--arch", default="cpu", choices=ts.runtime.ARCHS,
+                    help="cpu, or a GPU arch (cuda) for --beds-only")
     ap.add_argument("--beds-only", action="store_true",
                     help="only the FCC bed (on the CPU: 1 and 2 threads; on a GPU: once), "
                          "written to the section fcc-bed-ARCH-SETTINGS")
@@ -360,9 +380,10 @@ def main(argv=None):
                     help="--beds-only: seconds each bed may take (settling included)")
     ap.add_argument("--child-bed", nargs=3, default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
-    if args.arch != "cpu" and not (args.beds_only or args.child_bed):
-        ap.error("--arch other than cpu needs --beds-only")
-    ts.runtime.ensure(args.arch, "f64", args.threads or (1 if args.arch == "cpu" else None))
+    check_args(ap, args)
+    if args.child_bed or not args.beds_only:    # (--beds-only runs its beds in children)
+        ts.runtime.ensure(args.arch, "f64",
+                          args.threads or (1 if args.arch == "cpu" else None))
     if args.child_bed:
         print(json.dumps(bed_child(int(args.child_bed[0]), float(args.child_bed[1]),
                                    args.child_bed[2], arch=args.arch)))

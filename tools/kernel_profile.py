@@ -99,36 +99,45 @@ def main(argv=None):
     ap.add_argument("--top", type=int, default=8)
     ap.add_argument("--gas", type=int, default=0,
                     help="the gas of tools/bench.py with this many spheres (packing 0.3)")
-    ap.add_argument("--arch", default="cpu", help="cpu (1 thread) or a GPU arch (cuda)")
+    ap.add_argument("--arch", default="cpu", choices=runtime.ARCHS,
+                    help="cpu (1 thread) or a GPU arch (cuda)")
     ap.add_argument("--precision", default="f64", choices=["f64", "f32"])
     ap.add_argument("--host", action="store_true",
                     help="also profile the Python side of the window (cProfile, top 15)")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args(argv)
-    if not (args.silo or args.gas) and args.scene is None:
-        ap.error("give --scene TOML, --gas N or --silo")
+    if [args.scene is not None, args.silo, args.gas != 0].count(True) != 1:
+        ap.error("give one of --scene TOML, --gas N or --silo")
+    if args.gas < 0:
+        ap.error(f"--gas must be a positive sphere count, got {args.gas}")
+    if args.silo and (args.arch != "cpu" or args.precision != "f64"):
+        ap.error("--silo runs on the CPU in f64 (the silo of tools/silo.py)")
     for mode in runtime.COMPILE_MODES.values():
         mode["kernel_profiler"] = True
     threads = 1 if args.arch == "cpu" else None
     runtime.ensure(args.arch, args.precision, threads=threads)
-    if args.silo:
-        sim, label, section = silo_simulation(), "Silo discharge (tools/peer_lammps_silo.py's)", "profile-silo"
-    elif args.gas:
-        from taichi_spheres.builders import gas
-        sim = ts.Simulation(gas(args.gas, packing=0.3, periodic=True, seed=0), arch=args.arch,
-                            precision=args.precision, threads=threads)
-        label, section = f"Gas of {args.gas} spheres (tools/bench.py's)", f"profile-gas-{args.arch}"
-    else:
-        sim = ts.Simulation(ts.load_scene(args.scene), arch=args.arch,
-                            precision=args.precision, threads=threads)
-        sim.advance_to(args.at)
-        name = os.path.splitext(os.path.basename(args.scene))[0]
-        label, section = f"`{args.scene}` from t = {args.at} s", f"profile-{name}"
-    if args.arch != "cpu":
-        section += "" if section.endswith(args.arch) else f"-{args.arch}"
+    sim, label, section = simulation(args, threads)
     publish(report(args, label, profile(sim, args.window)), section, args.write)
     if args.host:
         host_profile(sim, args.window)
+
+
+def simulation(args, threads) -> tuple:
+    """(Simulation at the window's start, its label in the report, the report's section)
+    of the command line's run."""
+    if args.silo:
+        return silo_simulation(), "Silo discharge (tools/peer_lammps_silo.py's)", "profile-silo"
+    if args.gas:
+        from taichi_spheres.builders import gas
+        sim = ts.Simulation(gas(args.gas, packing=0.3, periodic=True, seed=0), arch=args.arch,
+                            precision=args.precision, threads=threads)
+        return sim, f"Gas of {args.gas} spheres (tools/bench.py's)", f"profile-gas-{args.arch}"
+    sim = ts.Simulation(ts.load_scene(args.scene), arch=args.arch, precision=args.precision,
+                        threads=threads)
+    sim.advance_to(args.at)
+    name = os.path.splitext(os.path.basename(args.scene))[0]
+    section = f"profile-{name}" + ("" if args.arch == "cpu" else f"-{args.arch}")
+    return sim, f"`{args.scene}` from t = {args.at} s", section
 
 
 def host_profile(sim, window: float) -> None:

@@ -109,11 +109,14 @@ def main(argv=None):
     p.add_argument("--settle", type=float, default=0.0, help="[s], orifice closed")
     p.add_argument("--duration", type=float, default=0.02, help="timed discharge [s]")
     p.add_argument("--threads", type=int, nargs="+", default=None,
-                   help="CPU thread counts (default 1 2; ignored on a GPU)")
-    p.add_argument("--arch", default="cpu", help="cpu or a GPU arch (cuda)")
+                   help="CPU thread counts (default 1 2; not on a GPU)")
+    p.add_argument("--arch", default="cpu", choices=ts.runtime.ARCHS,
+                   help="cpu or a GPU arch (cuda)")
     p.add_argument("--write", action="store_true")
     p.add_argument("--no-write", dest="write", action="store_false")
     a = p.parse_args(argv)
+    if a.threads is not None and (a.arch != "cpu" or min(a.threads) < 1):
+        p.error("--threads takes CPU thread counts >= 1, and only with --arch cpu")
     rows = []
     a.threads = (a.threads or [1, 2]) if a.arch == "cpu" else [None]
     for threads in a.threads:

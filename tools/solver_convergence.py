@@ -137,7 +137,6 @@ class Problem:
 def sweep_rows(prob: Problem, lam_l: list, vl: list, order, omega: float = 1.0) -> None:
     """One sweep of contacts/pgs.py's row update over the rows in ``order``, in place on
     the impulses lam_l and the sphere velocities vl (Python lists: fast per row)."""
-    p = prob.p
     a, b, n, meff, tgt = prob.lists
     im = prob.im
     for s in order:
@@ -185,7 +184,8 @@ def nncg(prob: Problem, sweeps: list[int]) -> dict:
     first adds beta_k p_{k-1} with beta_k = |r_k|^2 / |r_{k-1}|^2 (Fletcher-Reeves;
     restart, p = 0, when beta_k > 1), p_k = beta_k p_{k-1} - r_k. Velocities after
     each requested number of sweeps (each sweep also pays a pass over the rows that
-    applies beta_k p_{k-1})."""
+    applies beta_k p_{k-1}). The step is not projected (as in the paper): impulses may
+    be negative between sweeps, and so the velocities reported after one."""
     p = prob.p
     order = p["order"].tolist()
     lam = p["lam"].astype(np.float64).copy()
