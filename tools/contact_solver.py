@@ -359,7 +359,8 @@ def check_args(ap, args) -> None:
         ap.error("--quick does not go with --beds-only (give --bed-n)")
 
 
-def main(argv=None):
+def parser() -> argparse.ArgumentParser:
+    """The command line (module docstring)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--scene", default="scenes/pour.toml")
     ap.add_argument("--phases", type=float, nargs=2, default=(1.0, 2.0))
@@ -379,25 +380,24 @@ def main(argv=None):
     ap.add_argument("--child-timeout", type=float, default=None,
                     help="--beds-only: seconds each bed may take (settling included)")
     ap.add_argument("--child-bed", nargs=3, default=None, help=argparse.SUPPRESS)
-    args = ap.parse_args(argv)
-    check_args(ap, args)
-    if args.child_bed or not args.beds_only:    # (--beds-only runs its beds in children)
-        ts.runtime.ensure(args.arch, "f64",
-                          args.threads or (1 if args.arch == "cpu" else None))
-    if args.child_bed:
-        print(json.dumps(bed_child(int(args.child_bed[0]), float(args.child_bed[1]),
-                                   args.child_bed[2], arch=args.arch)))
-        return 0
-    if args.beds_only:
-        beds = {}
-        for name in (BED_SETTINGS[key] for key in args.bed_settings):
-            for t in (1, 2) if args.arch == "cpu" else (None,):
-                beds[t, name] = bed(args.bed_n, args.bed_time, t, name, args.arch,
-                                    args.child_timeout)
-                print(t, name, beds[t, name], flush=True)
-        publish(beds_report(args, beds), "-".join(["fcc-bed", args.arch, *args.bed_settings]),
-                args.write)
-        return 0
+    return ap
+
+
+def beds_only(args) -> None:
+    """--beds-only: the FCC bed with each of args.bed_settings, each in a child process
+    (on the CPU on 1 and 2 threads), printed as they finish, then the report."""
+    beds = {}
+    for name in (BED_SETTINGS[key] for key in args.bed_settings):
+        for t in (1, 2) if args.arch == "cpu" else (None,):
+            beds[t, name] = bed(args.bed_n, args.bed_time, t, name, args.arch,
+                                args.child_timeout)
+            print(t, name, beds[t, name], flush=True)
+    publish(beds_report(args, beds), "-".join(["fcc-bed", args.arch, *args.bed_settings]),
+            args.write)
+
+
+def everything(args) -> None:
+    """The whole report (module docstring) on the CPU."""
     if args.quick:
         args.phases, args.bed_n = (0.3, 0.6), 4000
     os.chdir(ROOT)
@@ -422,6 +422,21 @@ def main(argv=None):
             for name in ("defaults", "shock propagation on", FAST) for t in (1, 2)}
     publish(report(args, p, cols, warm, beds, capped, balls), "contact-solver",
             args.write and not args.quick)
+
+
+def main(argv=None):
+    ap = parser()
+    args = ap.parse_args(argv)
+    check_args(ap, args)
+    if args.beds_only and not args.child_bed:    # (its beds run in child processes)
+        beds_only(args)
+        return 0
+    ts.runtime.ensure(args.arch, "f64", args.threads or (1 if args.arch == "cpu" else None))
+    if args.child_bed:
+        print(json.dumps(bed_child(int(args.child_bed[0]), float(args.child_bed[1]),
+                                   args.child_bed[2], arch=args.arch)))
+        return 0
+    everything(args)
     return 0
 
 
