@@ -41,11 +41,11 @@ FAST_MATH = False
 #: maximum into (the step's counters, the largest move and overlap), and every
 #: launched thread folds its copy into the global one at its end. On a GPU a loop
 #: whose bounds are read from a field is launched on a fixed, device-filling number of
-#: threads (~540,000 on an H200), so every such kernel paid ~540,000 contended atomics,
-#: ~3.5 ms, even with nothing to do (the resolve, re-detection and near-list kernels).
-#: Off on GPUs, only the iterations that count something touch the global scalars:
-#: a 10^4-sphere gas step on an H200 went from 76 to 4.4 ms with Taichi's kernel
-#: profiler on (``python tools/kernel_profile.py --gas 10000 --arch cuda --window
+#: threads (~540,000 on an H200), so with the copies every such kernel pays ~540,000
+#: contended atomics, ~3.5 ms, even with nothing to do (the resolve, re-detection and
+#: near-list kernels). Off on GPUs, only the iterations that count something touch the
+#: global scalars: a 10^4-sphere gas step on an H200 takes 4.4 ms instead of 76 with
+#: Taichi's kernel profiler on (``python tools/kernel_profile.py --gas 10000 --arch cuda --window
 #: 0.1``, docs/bench.md). Vulkan and Metal launch such loops on a fixed number of
 #: threads too and get the same setting (not measured there). The CPU keeps Taichi's
 #: default: its few threads fold a few copies, and its bits (tests/same_bits.json) stay
