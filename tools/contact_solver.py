@@ -55,7 +55,7 @@ import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.builders import ball_on_block, fcc_block  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from taichi_spheres.simulation import DEFAULT_STEP_FRACTION  # noqa: E402
-from machine import cpu_name, gpu_name, publish, untimed_pass  # noqa: E402  (tools/machine.py)
+from machine import cpu_name, hardware, publish, untimed_pass  # noqa: E402  (tools/machine.py)
 
 G = 9.81
 
@@ -279,7 +279,7 @@ def beds_table(args, beds) -> list:
 
 def beds_report(args, beds) -> str:
     """The section of --beds-only: the FCC bed on args.arch, with its hardware."""
-    hw = (gpu_name() or args.arch) if args.arch != "cpu" else f"{cpu_name()}, threads as given"
+    hw = hardware(args.arch) + (", threads as given" if args.arch == "cpu" else "")
     cmd = " ".join(["python tools/contact_solver.py --beds-only --arch", args.arch,
                     "--bed-n", str(args.bed_n), "--bed-settings", *args.bed_settings,
                     "--write"])

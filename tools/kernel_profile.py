@@ -38,7 +38,7 @@ from taichi.profiler.kernel_profiler import get_default_kernel_profiler  # noqa:
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres import runtime  # noqa: E402
-from machine import cpu_name, gpu_name, publish, untimed_pass  # noqa: E402
+from machine import hardware, publish, untimed_pass  # noqa: E402
 
 
 def silo_simulation():
@@ -74,8 +74,7 @@ def profile(sim, window: float) -> dict:
 
 def report(args, label, p) -> str:
     total = sum(t for t, _ in p["kernels"].values())
-    hw = (f"{cpu_name()}, 1 thread" if args.arch == "cpu"
-          else f"{gpu_name() or args.arch}, {args.precision}")
+    hw = hardware(args.arch) + (", 1 thread" if args.arch == "cpu" else f", {args.precision}")
     lines = [f"Measured {datetime.date.today()} on {hw}: "
              f"`python tools/kernel_profile.py {' '.join(a for a in sys.argv[1:] if a != '--write')}`",
              "",

@@ -35,6 +35,12 @@ def gpu_name():
         return None
 
 
+def hardware(arch: str) -> str:
+    """What a run on ``arch`` ran on, for a report: the CPU model on "cpu", else the GPU
+    (nvidia-smi's name, or the arch)."""
+    return cpu_name() if arch == "cpu" else (gpu_name() or arch)
+
+
 SECTION_BEGIN = "<!-- begin {} -->"
 SECTION_END = "<!-- end {} -->"
 

@@ -35,7 +35,7 @@ sys.path.insert(0, HERE)
 
 import taichi_spheres as ts  # noqa: E402
 import silo  # noqa: E402  (tools/silo.py)
-from machine import cpu_name, gpu_name, untimed_pass, write_section  # noqa: E402
+from machine import hardware, untimed_pass, write_section  # noqa: E402
 
 
 def fill_height(count, radius, silo_radius) -> float:
@@ -48,7 +48,6 @@ def fill_height(count, radius, silo_radius) -> float:
 def run(a, threads) -> dict:
     """One discharge on ``a.arch`` with ``threads`` CPU threads (module docstring; None on
     a GPU, where the threads only launch kernels)."""
-    ts.runtime.ensure(a.arch, "f64", threads)
     settings = types.SimpleNamespace(silo_radius=a.silo_radius, radius=a.radius, mu=0.5,
                                      fill=fill_height(a.count, a.radius, a.silo_radius))
     c = a.silo_radius + 0.005
@@ -82,8 +81,7 @@ def run(a, threads) -> dict:
 
 
 def report(rows, argv, a) -> str:
-    hw = cpu_name() if a.arch == "cpu" else (gpu_name() or a.arch)
-    lines = [f"Measured {datetime.date.today()} on {hw}, f64: "
+    lines = [f"Measured {datetime.date.today()} on {hardware(a.arch)}, f64: "
              f"`python tools/silo_large.py {' '.join(argv)}`".rstrip(), "",
              f"{rows[0]['n']} spheres of d = {2e3 * a.radius:g} mm in a silo of radius "
              f"{1e3 * a.silo_radius:g} mm, orifice D = {a.orifice:g} d; "
