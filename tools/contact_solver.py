@@ -178,7 +178,8 @@ FAST_BEDS = dict(relaxation=1.8, contact_iterations=40, position_iterations=40,
 #: FAST_BEDS by name in the report
 FAST = "relaxation 1.8, 40 / 40 sweeps, shock propagation on"
 
-#: over-relaxed sweeps with caps that keep the pour's bed within 1e-4 d (docs/bench.md)
+#: over-relaxed sweeps, 70 / 50: the pour's bed under 1 wall s per simulated s, up to
+#: 1.7e-4 d after a step (docs/bench.md)
 RELAXED_BEDS = dict(relaxation=1.8, contact_iterations=70, position_iterations=50)
 RELAXED = "relaxation 1.8, 70 / 50 sweeps"
 
