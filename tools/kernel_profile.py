@@ -74,7 +74,8 @@ def profile(sim, window: float) -> dict:
 
 def report(args, label, p) -> str:
     total = sum(t for t, _ in p["kernels"].values())
-    hw = hardware(args.arch) + (", 1 thread" if args.arch == "cpu" else f", {args.precision}")
+    hw = hardware(args.arch) + (", 1 thread" if args.arch == "cpu"
+                                else f", {args.precision}")
     lines = [f"Measured {datetime.date.today()} on {hw}: "
              f"`python tools/kernel_profile.py {' '.join(a for a in sys.argv[1:] if a != '--write')}`",
              "",

@@ -91,7 +91,9 @@ def report(rows, argv, a) -> str:
              "| threads | wall s / sim s | steps | rows / step | sweeps / step | "
              "discharged | max overlap / d |", "|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['threads'] or a.arch.upper()} | {r['wall_per_sim']:.{0 if r['wall_per_sim'] >= 100 else 2}f} | {r['steps']} | "
+        wall = r["wall_per_sim"]
+        lines.append(f"| {r['threads'] or a.arch.upper()} | {wall:.{0 if wall >= 100 else 2}f} | "
+                     f"{r['steps']} | "
                      f"{r['rows']:.0f} | {r['sweeps']:.0f} | {r['discharged']} | "
                      f"{r['overlap']:.1e} |")
     return "\n".join(lines)
