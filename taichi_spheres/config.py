@@ -47,6 +47,11 @@ class Rules:
     contact_iterations: velocity sweeps of the contact solver per step at most.
     warm_start: start each step's impulses from the same rows' last impulses (False:
         from zero; for measuring what warm starting saves).
+    bounded_warm_start: scale a step's warm start down where it would leave the
+        velocity solve more kinetic energy than it started with (after an impact the
+        last step's impulses can be far too large, and a solve stopped at its cap then
+        added energy; contacts/warm_energy.py). False: the plain warm start, for
+        measuring what the bound changes.
     position_iterations: pseudo-velocity (split impulse) sweeps per step at most.
     relaxation: over-relaxation factor omega of the Gauss-Seidel updates, in (0, 2) (1:
         plain projected Gauss-Seidel; 1 < omega < 2 converges faster on stacks; friction
@@ -83,6 +88,7 @@ class Rules:
     contact_tolerance: float = 1e-6
     contact_iterations: int = 100
     warm_start: bool = True
+    bounded_warm_start: bool = True
     relaxation: float = 1.0
     plain_sweeps: int = 10
     position_iterations: int = 100

@@ -29,10 +29,12 @@ MAX_SINKS = 8
 #: rule; of a fused step (fused.py) also: 1 if it ran the overlap projection, and the
 #: pairs the projection pushed; of the contact solver (contacts/solver.py): its rows,
 #: velocity sweeps and position sweeps; spheres whose centre is in a sink at the end
-#: of the drift (simulation.py removes them).
+#: of the drift (simulation.py removes them); 1 if the solver scaled its warm start
+#: down (contacts/warm_energy.py).
 COUNTS = ("remaining", "pair_collisions", "wall_collisions", "wall_rests",
           "multi_collision_spheres", "collapse_collisions", "projected", "projected_pairs",
-          "contacts", "contact_iterations", "position_iterations", "in_sinks")
+          "contacts", "contact_iterations", "position_iterations", "in_sinks",
+          "warm_starts_scaled")
 #: real values of one step: max relative overlap of separating pairs, of approaching
 #: pairs in the last detection; max |v|^2 [m^2/s^2]; max distance moved since the grid
 #: was built [m]; energy removed by pair restitution, wall restitution, the collapse

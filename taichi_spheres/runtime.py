@@ -34,7 +34,10 @@ COMPILE_ENV = "TAICHI_SPHERES_COMPILE"
 #: (AVX2/AVX-512 FMA, ARM), compile modes and loop shapes, so the same scene gave
 #: other bits on another CPU or in the other compile mode. Off, every operation
 #: rounds as written (IEEE 754), and the results depend only on the scene, precision
-#: and thread count (tests/test_same_bits.py). Cost at N = 1e5: docs/bench.md.
+#: and thread count (tests/test_same_bits.py). Cost at N = 1e5: docs/bench.md. On
+#: CUDA, Taichi 1.7 marks every kernel function with LLVM's unsafe-fp-math (for its
+#: fast square roots) whatever fast_math says, so multiply-adds may fuse there as the
+#: code's shape allows: GPU bits can differ between compile modes (docs/backends.md).
 FAST_MATH = False
 #: Taichi's make_thread_local (its default is True) gives each thread of a parallel
 #: loop a private copy of every global scalar the loop only adds to or takes the

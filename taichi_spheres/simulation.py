@@ -201,7 +201,8 @@ class Simulation:
                             projected_pairs=0, near_list_detections=0, contacts=0,
                             contact_iterations=0, position_iterations=0,
                             contact_residual=0.0, contact_steps=0, discharged=0,
-                            discharged_mass=0.0, energy_discharged=0.0)
+                            discharged_mass=0.0, energy_discharged=0.0,
+                            warm_starts_scaled=0)
         self._sink_rng = np.random.default_rng(12345)   # free spots of recycled spheres
         #: scene indices of the spheres still simulated (sinks take some out)
         self.sphere_ids = np.arange(scene.n)
@@ -261,7 +262,9 @@ class Simulation:
         see contacts.Contacts.detect); of the contact solver (contacts/solver.py):
         contact_steps (steps it ran), contacts (rows, summed over steps),
         contact_iterations and position_iterations (velocity and split-impulse sweeps,
-        summed), contact_residual (largest velocity change of a last sweep [m/s]); plus
+        summed), contact_residual (largest velocity change of a last sweep [m/s]),
+        warm_starts_scaled (steps whose warm start it scaled down so that it would add
+        no energy: contacts/warm_energy.py); plus
         discharged, discharged_mass [kg], energy_discharged [J] (spheres that entered a
         sink: discharge.py); plus time and dt."""
         out = dict(self._totals)
@@ -456,7 +459,7 @@ class Simulation:
     _SUMMED = ("pair_collisions", "wall_collisions", "wall_rests", "multi_collision_spheres",
                "collapse_collisions", "energy_pair_restitution", "energy_wall_restitution",
                "energy_collapse", "energy_contacts", "virial", "contacts",
-               "contact_iterations", "position_iterations")
+               "contact_iterations", "position_iterations", "warm_starts_scaled")
 
     def _book_step(self, c, h, sweeps, remaining, overlap):
         """Add a step's counters ``c`` (params.read_back) to the totals; keep its step

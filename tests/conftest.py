@@ -1,6 +1,7 @@
 """Test configuration: the arch comes from a fixture, never from import-time ti.init.
 
 ``--arch`` picks the backend (default cpu); ``--slow`` enables long validation runs;
+TAICHI_SPHERES_FAILURE_LOG names a file that gets each failure's report at once;
 ``--compile`` how Taichi compiles (default fast: same bits, ~3x shorter compiles, which
 are most of the suite's time; see taichi_spheres/runtime.py COMPILE_MODES).
 Tolerances depend on precision: ``tol`` scales a relative tolerance by the machine
@@ -28,6 +29,18 @@ def pytest_configure(config):
         os.environ[COMPILE_ENV] = mode
     else:
         os.environ.setdefault(COMPILE_ENV, "fast")
+
+
+#: a file each failure's report is appended to as soon as it happens (a run cut off by
+#: a time limit, e.g. tools/cuda_checks.sh, keeps the failures pytest prints at its end)
+FAILURE_LOG_ENV = "TAICHI_SPHERES_FAILURE_LOG"
+
+
+def pytest_runtest_logreport(report):
+    path = os.environ.get(FAILURE_LOG_ENV)
+    if path and report.failed:
+        with open(path, "a", encoding="utf-8") as out:
+            out.write(f"==== {report.nodeid} ({report.when})\n{report.longreprtext}\n\n")
 
 
 def _runs_f32(item) -> bool:
@@ -72,3 +85,13 @@ def tol_for(sim, f64_value, f32_factor):
     CUDA, f32 on Vulkan and Metal): f64_value in f64, f32_factor x f32's machine
     epsilon in f32."""
     return f64_value if sim.precision == "f64" else tol("f32", f32_factor)
+
+
+def assert_same_counters(a: dict, b: dict, sim) -> None:
+    """Two runs' ``stats`` are equal; on a GPU the energy books and the virial, sums of
+    float atomics in thread order, only to round-off (README, "Same bits")."""
+    for key, value in a.items():
+        if sim.runtime.is_cpu or not (key.startswith("energy") or key == "virial"):
+            assert b[key] == value, key
+        else:
+            assert b[key] == pytest.approx(value, rel=tol_for(sim, 1e-12, 1e2)), key

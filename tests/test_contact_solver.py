@@ -397,6 +397,35 @@ def test_heavy_ball_dropped_onto_a_settled_bed(arch, shock):
     assert sim.stats["pair_collisions"] > 0 and sim.stats["contacts"] > 0
 
 
+@pytest.mark.parametrize("bounded", [True, False])
+def test_bounded_warm_start_adds_no_energy_after_a_heavy_impact(arch, bounded):
+    """The heavy ball of the test above, solved with few over-relaxed sweeps (relaxation
+    1.8, 40 velocity and 40 position sweeps), where the step after the impact starts
+    from the impulses that stopped the ball and stops at its cap
+    (contacts/warm_energy.py). With the warm start bounded the total energy never grows
+    in a step by more than 1e-3 of the ball's kinetic energy at impact (what is left:
+    the split impulse lifting the block off the floor) and the solver counts the steps
+    it scaled; the plain warm start grows it by more than a tenth of that energy in one
+    step (what the bound is for)."""
+    tuning = Tuning().with_(relaxation=1.8, contact_iterations=40, position_iterations=40,
+                            bounded_warm_start=bounded)
+    scene = fcc_block(4)
+    sim = ts.Simulation(scene, arch=arch, tuning=tuning)
+    sim.advance(1.0)
+    bed, x, v = ball_on_block(scene, sim.state(), ratio=8.0, height=0.05, speed=1.0)
+    sim = ts.Simulation(bed, arch=arch, tuning=tuning)
+    sim.set_state(x, v)
+    impact = 0.5 * bed.mass[-1] * (1.0 + 2 * G * (0.05 - 2 * R))     # [J]
+    growth = np.diff(_energies_by_step(sim, 120)).max()
+    assert sim.stats["pair_collisions"] > 0
+    if bounded:
+        assert growth <= 1e-3 * impact
+        assert sim.stats["warm_starts_scaled"] > 0
+    else:
+        assert growth > 0.1 * impact
+        assert sim.stats["warm_starts_scaled"] == 0
+
+
 def _periodic_layer_scene(layers=8):
     """Touching layers of 3 x 3 spheres on the floor of a box periodic on x and y, 3
     grid cells wide on each (the grid's only odd periodic count: 3 colours)."""

@@ -4,7 +4,8 @@
 #   bench  tools/bench.py --arch cuda (gas throughput, f64 and f32)     -> DIR/bench_cuda.md
 #   beds   tools/contact_solver.py --beds-only --arch cuda (10^5 FCC bed) -> docs/bench.md
 #   silo   tools/silo_large.py --arch cuda (10^5-sphere silo)           -> docs/bench.md
-#   suite  the suite with --arch cuda                                    -> DIR/suite.log
+#   suite  the suite with --arch cuda        -> DIR/suite.log, failures as they happen in
+#          DIR/failures.log
 # Each part's log and a copy of docs/bench.md go to DIR; DIR/machine.txt says which parts
 # ran, were skipped or failed (exit code 124: out of time). The script exits 1 if a part
 # failed. The tools print each row as it is measured (in the logs), and write their
@@ -27,6 +28,7 @@ failed=0
 export PYTHONUNBUFFERED=1
 { date -u; nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv;
   "$py" -c "import taichi, numpy, sys; print(sys.version, taichi.__version__, numpy.__version__)"
+  "$py" -c "import imageio_ffmpeg as f; print('ffmpeg', f.get_ffmpeg_exe())"
 } >"$dir/machine.txt" 2>&1
 
 # part NAME SECONDS LOG COMMAND...: run COMMAND for at most SECONDS if PARTS names NAME
@@ -43,13 +45,14 @@ part() {
   [ "$rc" = 0 ] || failed=1
 }
 
-part bench "${BENCH_S:-150}" bench.log "$py" tools/bench.py --arch cuda \
+part bench "${BENCH_S:-240}" bench.log "$py" tools/bench.py --arch cuda \
     --sizes 10000 100000 1000000 --seconds 1.5 --feature-n 0 --out "$dir/bench_cuda.md"
 part beds "${BEDS_S:-240}" beds.log "$py" tools/contact_solver.py --beds-only --arch cuda \
     --bed-settings defaults relaxed fast --child-timeout 70 --write
 part silo "${SILO_S:-120}" silo.log "$py" tools/silo_large.py --arch cuda --duration 0.05 \
     --write
 cp docs/bench.md "$dir/bench.md"
+export TAICHI_SPHERES_FAILURE_LOG="$dir/failures.log"
 part suite "${SUITE_S:-200}" suite.log "$py" -m pytest -v --tb=short -n "${WORKERS:-12}" \
     --arch cuda -p no:cacheprovider
 exit "$failed"

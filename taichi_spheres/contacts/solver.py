@@ -15,7 +15,9 @@ between the surfaces (< 0: overlap):
   smallest diameter, count as touching so that round-off in the gaps makes no
   targets), accumulated over projected Gauss–Seidel iterations and
   clamped (Catto's sequential impulses), warm-started from the same pair's
-  lambda of the previous step (scaled by h / h_prev);
+  lambda of the previous step (scaled by h / h_prev), and as a whole scaled down
+  where it would leave the solve more kinetic energy than it started with
+  (contacts/warm_energy.py);
 - positions follow the trapezoidal rule of Moreau–Jean with theta = 1/2:
   ``x += h/2 dv`` for the velocity change ``dv`` of the contact impulses. Free
   flight stays exact (``dv = 0``) and a sphere resting under gravity, which the
@@ -56,13 +58,15 @@ from .pgs import POSITION, VELOCITY, WARM, GaussSeidel
 from .rows import ContactRows
 from .shock import ShockPropagation, shock_compiled
 from .sweeps import MAX_COLOURS
+from .warm_energy import WarmStartEnergy
 
 __all__ = ["ContactSolver"]
 
 
 
 @ti.data_oriented
-class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
+class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
+                    WarmStartEnergy):
     """Contact rows and their projected Gauss–Seidel solve (module docstring).
 
     Fields (K = contacts_per_sphere x capacity rows, M = cells, N = spheres):
@@ -116,6 +120,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         per_task = max(1, cfg.default_cpu_block_dim // self.interleave_parallel)
         self.sweep_block = 1 << (per_task.bit_length() - 1) if cpu else None
         self.shock = shock_compiled(features, self.rules)
+        # warm_energy.py: the warm start scaled so that it adds no energy
+        self.bounded_warm_start = self.rules.warm_start and self.rules.bounded_warm_start
         self._allocate(state.capacity, grid.cell_capacity)
         self._build_kernels()
 
@@ -159,6 +165,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         self.tol_w = ti.field(real, shape=())        # pseudo-velocity tolerance [m/s]
         self.n_colours_f = ti.field(ti.i32, shape=())
         self.tol_len = ti.field(real, shape=())      # position tolerance [m] (bind)
+        self._allocate_warm_energy(cap, k)
         if self.shock:
             self._allocate_shock()
 
@@ -272,6 +279,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
             self.list_active_cells()
             self.prepare_rows()
             self.warm_start_serially()
+            if ti.static(self.bounded_warm_start):
+                self.bound_warm_start()
             params.contact_iterations[None] = self.iterate_serially(
                 VELOCITY, ti.static(rules.contact_iterations), self.tol_v)
             params.contact_residual[None] = self.residual[None]
@@ -306,6 +315,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         self._sweeps = {}
 
         @ti.kernel
+        def bound_warm():
+            self.bound_warm_start()
+
+        @ti.kernel
         def middle():
             if ti.static(self.shock):
                 self.shock_pass()
@@ -319,6 +332,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
 
         self._solve_serial = solve_serial
         self._start, self._middle, self._end = start, middle, end
+        self._bound_warm = bound_warm
 
     def _sweep(self, mode):
         """The one-sweep kernel of ``mode`` for the bound colour count (built once)."""
@@ -339,6 +353,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation):
         self._start()
         if self.rules.warm_start:
             self._sweep(WARM)(1.0)
+            if self.bounded_warm_start:
+                self._bound_warm()
         iterations = self._iterate(VELOCITY, self.rules.contact_iterations, self.tol_v)
         self.params.contact_residual[None] = self.residual[None]
         self._middle()
