@@ -4,7 +4,9 @@
 # each with a fresh Taichi kernel cache, so that LLVM compiles for the emulated CPU
 # (it reads the model from cpuid, which QEMU emulates). Every row must say "match".
 # QEMU 7.2 emulates SSE4.2, AVX, AVX2 and FMA but not AVX-512 (run the script natively
-# on such a CPU). Emulation is slow: 2-10 min per model for the "small" case.
+# on such a CPU). Emulation is slow: 1-10 min per model for the "small" case. A model
+# whose run prints no digest line crashed: its stderr is hidden, rerun that command
+# by hand with `-X faulthandler` to see where.
 #
 #   bash tools/emulated_cpus.sh                       # installs qemu-user with apt-get
 #   bash tools/emulated_cpus.sh Nehalem Haswell-noTSX
@@ -25,6 +27,13 @@ for cpu in native "${models[@]}"; do
     # -0: the interpreter sees the venv's path as argv[0] and finds its packages
     run=(qemu-x86_64 -cpu "$cpu" -0 "$venv_python" "$real_python")
   fi
+  # numpy's OpenBLAS picks its kernels from cpuid and, under QEMU, picked ones with
+  # instructions Nehalem and Sandy Bridge lack (SIGILL in a matrix product): name the core
+  case "$cpu" in
+    Nehalem) export OPENBLAS_CORETYPE=Nehalem ;;
+    SandyBridge) export OPENBLAS_CORETYPE=Sandybridge ;;
+    *) unset OPENBLAS_CORETYPE ;;
+  esac
   echo "## $cpu"
   TAICHI_SPHERES_COMPILE=fast TI_OFFLINE_CACHE_FILE_PATH=$cache \
     "${run[@]}" tools/state_digest.py --cases ${CASES:-small} --precisions ${PRECISIONS:-f64 f32} 2>/dev/null | grep '^{' || true

@@ -176,7 +176,9 @@ class ContactRows:
         if b >= 0:
             d = self.pairs.min_image(self.state.x[a] - self.state.x[b])
             dist = d.norm()
-            n = d / dist
+            n[2] = 1       # centres that met (a pair crushed into one point): a fixed axis
+            if dist > 0:
+                n = d / dist
             gap = dist - self.state.rad(a) - self.state.rad(b)
             meff = 1 / (self.inv_mass(a) + self.inv_mass(b))
         elif -1 - b >= GEOMETRY_ROWS:
