@@ -47,11 +47,14 @@ class Rules:
     contact_iterations: velocity sweeps of the contact solver per step at most.
     warm_start: start each step's impulses from the same rows' last impulses (False:
         from zero; for measuring what warm starting saves).
-    bounded_warm_start: scale a step's warm start down where it would leave the
+    bounded_warm_start: "on" scales a step's warm start down where it would leave the
         velocity solve more kinetic energy than it started with (after an impact the
         last step's impulses can be far too large, and a solve stopped at its cap then
-        added energy; contacts/warm_energy.py). False: the plain warm start, for
-        measuring what the bound changes.
+        added energy; contacts/warm_energy.py); "off" keeps the plain warm start;
+        "auto" (default): on without friction, off with it. The bound is one factor
+        for all contacts, and with friction any contact whose sliding turns makes its
+        warm friction impulse add energy: in a discharging silo that cut the friction
+        the warm start carries from step to step (docs/algorithm.md).
     position_iterations: pseudo-velocity (split impulse) sweeps per step at most.
     relaxation: over-relaxation factor omega of the Gauss-Seidel updates, in (0, 2) (1:
         plain projected Gauss-Seidel; 1 < omega < 2 converges faster on stacks; friction
@@ -88,7 +91,7 @@ class Rules:
     contact_tolerance: float = 1e-6
     contact_iterations: int = 100
     warm_start: bool = True
-    bounded_warm_start: bool = True
+    bounded_warm_start: str = "auto"
     relaxation: float = 1.0
     plain_sweeps: int = 10
     position_iterations: int = 100
@@ -100,9 +103,12 @@ class Rules:
     projection_relaxation: float = 0.5
 
     def __post_init__(self):
-        """ValueError naming the field: shock_propagation not one of SHOCK_MODES,
-        relaxation outside (0, 2) (where projected Gauss-Seidel converges), fewer than
-        one velocity or position sweep, negative plain_sweeps."""
+        """ValueError naming the field: shock_propagation or bounded_warm_start not one
+        of SHOCK_MODES, relaxation outside (0, 2) (where projected Gauss-Seidel
+        converges), fewer than one velocity or position sweep, negative plain_sweeps."""
+        if self.bounded_warm_start not in SHOCK_MODES:
+            raise ValueError(f"tuning bounded_warm_start must be one of {', '.join(SHOCK_MODES)}, "
+                             f"got {self.bounded_warm_start!r}")
         if self.shock_propagation not in SHOCK_MODES:
             raise ValueError(f"tuning shock_propagation must be one of {', '.join(SHOCK_MODES)}, "
                              f"got {self.shock_propagation!r}")

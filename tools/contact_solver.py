@@ -194,8 +194,8 @@ PLAIN_WARM = ", plain warm start"
 SETTINGS = {"defaults": {}, "relaxation 1.8": dict(relaxation=1.8),
             RELAXED: RELAXED_BEDS,
             "shock propagation on": dict(shock_propagation="on"), FAST: FAST_BEDS,
-            "defaults" + PLAIN_WARM: dict(bounded_warm_start=False),
-            FAST + PLAIN_WARM: dict(FAST_BEDS, bounded_warm_start=False)}
+            "defaults" + PLAIN_WARM: dict(bounded_warm_start="off"),
+            FAST + PLAIN_WARM: dict(FAST_BEDS, bounded_warm_start="off")}
 
 
 def heavy_ball(settings: str, steps: int = 200) -> dict:

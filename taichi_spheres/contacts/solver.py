@@ -121,7 +121,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.sweep_block = 1 << (per_task.bit_length() - 1) if cpu else None
         self.shock = shock_compiled(features, self.rules)
         # warm_energy.py: the warm start scaled so that it adds no energy
-        self.bounded_warm_start = self.rules.warm_start and self.rules.bounded_warm_start
+        bound = self.rules.bounded_warm_start
+        self.bounded_warm_start = self.rules.warm_start and (
+            bound == "on" or (bound == "auto" and not features.friction))
         self._allocate(state.capacity, grid.cell_capacity)
         self._build_kernels()
 

@@ -25,8 +25,12 @@ with dv, dw the velocity and spin changes the warm start made. The solve scales 
 start by the largest alpha <= 1 with f(alpha lambda_0) <= 0: alpha = min(1, -2 L / Q)
 (0 if L >= 0). In a resting bed the warm start lowers f and alpha = 1 (bits unchanged);
 after an impact it scales the leftover impulses down. Friction rows join f through
-their velocity changes; their cone moves with lambda_n, so for them the bound holds
-in the sweeps only approximately.
+their velocity changes (their cone moves with lambda_n, so for them the sweeps lower f
+only approximately). One alpha serves all contacts, and with friction any contact
+whose sliding turns makes its warm friction impulse add energy, so in a flowing
+frictional scene the bound keeps cutting the friction the warm start carries:
+Rules.bounded_warm_start "auto" (the default) leaves it off with friction
+(docs/algorithm.md, "Bounded warm start").
 
 L and Q are summed in fixed chunks of WARM_CHUNK spheres and rows, the chunk sums in
 order by one thread: the same bits for any thread count.
