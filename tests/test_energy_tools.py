@@ -1,0 +1,39 @@
+"""The energy-measuring tools (tools/warm_start_energy.py, tools/bed_energy.py): bad
+options are usage errors before any run, and their tables say what was measured. No
+timings or measured values are asserted (the tools are the measurement)."""
+import os
+import sys
+
+import pytest
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
+
+import bed_energy  # noqa: E402  (tools/bed_energy.py)
+import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
+
+
+@pytest.mark.parametrize("argv", [["--ratios", "0"], ["--frictions", "-0.1"],
+                                  ["--steps", "0"]])
+def test_warm_start_energy_refuses_bad_options(argv, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        warm_start_energy.main(argv)
+    assert exit_info.value.code == 2
+    assert "ratios must be > 0" in capsys.readouterr().err
+
+
+def test_warm_start_energy_table_has_a_row_per_case():
+    rows = {(100.0, 0.5, "off"): dict(growth=9.66e-2, step=34, scaled=0),
+            (100.0, 0.5, "on"): dict(growth=1.73e-4, step=49, scaled=36)}
+    text = warm_start_energy.report(rows, 300)
+    assert "| 100 | 0.5 | off | 9.7e-02 | 34 | 0 |" in text
+    assert "| 100 | 0.5 | on | 1.7e-04 | 49 | 36 |" in text
+    assert "next 300 steps" in text
+
+
+def test_bed_energy_table_quotes_lammps_from_its_stored_run():
+    rows = {(100, 100, 1.0): dict(ke=[3e-3, 4e-3, 2e-3, 1.5e-3], sweeps=100.0, wall=1.25)}
+    text = bed_energy.report("scenes/pour.toml", 300.0, rows)
+    assert "| 100 / 100 | 1 | 3.00e-03 | 4.00e-03 | 2.00e-03 | 1.50e-03 | 5.0e-06 | 100 | 1.25 |" \
+        in text
+    # the stored LAMMPS pour (docs/peer_lammps_pour_lammps.json) has both phase ends
+    assert "at 1 s" in text and "at 2 s" in text and "LAMMPS" in text
