@@ -40,7 +40,8 @@ def scene_digest(scene) -> str:
 def save(path, sim, scene, frame, fps) -> None:
     """Write the checkpoint atomically (temporary file, then rename)."""
     ck = sim.checkpoint()
-    meta = dict(time=ck["time"], vmax2=ck["vmax2"], totals=ck["totals"],
+    meta = dict(time=ck["time"], vmax2=ck["vmax2"], vmax2_loaded=ck["vmax2_loaded"],
+                totals=ck["totals"],
                 last_step=ck["last_step"], n=ck["n"], precision=ck["precision"],
                 step_fraction=ck["step_fraction"], max_sweeps=ck["max_sweeps"],
                 frame=int(frame), fps=float(fps), scene=scene_digest(scene))

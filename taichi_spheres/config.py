@@ -84,6 +84,14 @@ class Rules:
         to rest on the wall.
     projection_iterations: Jacobi iterations of the projection per step at most.
     projection_relaxation: fraction of every pair's overlap one iteration removes.
+    substeps: with a contact solver, run drift and impacts in substeps, each bounded
+        as a step is (no sphere moves more than step_fraction x r_min), and the
+        contact solver once per step, whose length is then bounded by the impact
+        speed instead: at least 2 D / impact speed (D = step_fraction x r_min), within
+        which two spheres approaching slower than the impact speed close at most
+        2 D, as two spheres each moving D do in one step without substeps. A few fast
+        spheres in flight then no longer set how often a bed is solved
+        (stepping.py, docs/algorithm.md "Substeps").
     """
 
     impact_factor: float = 2.0
@@ -101,6 +109,7 @@ class Rules:
     max_wall_bounces: int = 8
     projection_iterations: int = 8
     projection_relaxation: float = 0.5
+    substeps: bool = False
 
     def __post_init__(self):
         """ValueError naming the field: shock_propagation or bounded_warm_start not one
@@ -116,6 +125,8 @@ class Rules:
             raise ValueError(f"tuning relaxation must be in (0, 2), got {self.relaxation!r}")
         _require_at_least(self, ("contact_iterations", "position_iterations"), 1)
         _require_at_least(self, ("plain_sweeps",), 0)
+        if not isinstance(self.substeps, bool):
+            raise ValueError(f"tuning substeps must be True or False, got {self.substeps!r}")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -30,21 +30,42 @@ MAX_SINKS = 8
 #: pairs the projection pushed; of the contact solver (contacts/solver.py): its rows,
 #: velocity sweeps and position sweeps; spheres whose centre is in a sink at the end
 #: of the drift (simulation.py removes them); 1 if the solver scaled its warm start
-#: down (contacts/warm_energy.py).
+#: down (contacts/warm_energy.py); with Rules.substeps, collisions of spheres that had
+#: a contact row in the last solve (state.near; stepping.py ends the step at them).
 COUNTS = ("remaining", "pair_collisions", "wall_collisions", "wall_rests",
           "multi_collision_spheres", "collapse_collisions", "projected", "projected_pairs",
           "contacts", "contact_iterations", "position_iterations", "in_sinks",
-          "warm_starts_scaled")
+          "warm_starts_scaled", "near_hits")
 #: real values of one step: max relative overlap of separating pairs, of approaching
 #: pairs in the last detection; max |v|^2 [m^2/s^2]; max distance moved since the grid
 #: was built [m]; energy removed by pair restitution, wall restitution, the collapse
 #: rule and the contact solver [J]; collisional virial sum r_ij . dp_i [J s]; of a
 #: fused step that projected: the largest relative overlap its last projection
 #: iteration measured; of the contact solver: the residual of its last velocity sweep
-#: [m/s] and the largest relative overlap of its rows after the solve.
+#: [m/s], the largest relative overlap of its rows after the solve, and max |v|^2 of
+#: the spheres its rows hold (a row's impulse > 0) [m^2/s^2].
 VALUES = ("sep_overlap", "open_overlap", "vmax2", "moved", "energy_pair_restitution",
           "energy_wall_restitution", "energy_collapse", "energy_contacts", "virial",
-          "proj_worst", "contact_residual", "contact_overlap")
+          "proj_worst", "contact_residual", "contact_overlap", "vmax2_loaded")
+#: counters a step run in substeps (Rules.substeps) takes from its last substep (and
+#: the solve after it), and those it takes the largest of; the others add up
+LAST_OF_SUBSTEPS = ("in_sinks", "vmax2", "moved", "contact_residual", "contact_overlap",
+                    "vmax2_loaded")
+LARGEST_OF_SUBSTEPS = ("sep_overlap", "open_overlap", "proj_worst")
+
+
+def merge_substeps(before, last):
+    """The counters of a step run in substeps: ``before``, those of its earlier
+    substeps merged (None if there were none), and ``last``, read back after its last
+    substep and the solve (namespaces of :meth:`StepParams.read_back`)."""
+    if before is None:
+        return last
+    out = {}
+    for name in COUNTS + VALUES:
+        a, b = getattr(before, name), getattr(last, name)
+        out[name] = b if name in LAST_OF_SUBSTEPS else (
+            max(a, b) if name in LARGEST_OF_SUBSTEPS else a + b)
+    return types.SimpleNamespace(**out)
 
 
 @ti.data_oriented

@@ -189,6 +189,9 @@ class Simulation:
                                        self.geometry.n_cells)
         self._parked = (scene.x, scene.v, _scene_spins(scene), None)
         self._bind()
+        #: drift and impacts in substeps, the contact solver once per step (Rules.substeps)
+        self._substeps = bool(self.tuning.physics.substeps and self._engine.solver is not None
+                              and self.rest_speed > 0)
         self._r_min = float(scene.radius.min())
         self._g = float(np.linalg.norm(scene.gravity))
         self.time = 0.0
@@ -202,7 +205,7 @@ class Simulation:
                             contact_iterations=0, position_iterations=0,
                             contact_residual=0.0, contact_steps=0, discharged=0,
                             discharged_mass=0.0, energy_discharged=0.0,
-                            warm_starts_scaled=0)
+                            warm_starts_scaled=0, substeps=0)
         self._sink_rng = np.random.default_rng(12345)   # free spots of recycled spheres
         #: scene indices of the spheres still simulated (sinks take some out)
         self.sphere_ids = np.arange(scene.n)
@@ -323,7 +326,8 @@ class Simulation:
         return dict(x=st.x, v=st.v, omega=st.omega, radius=self.scene.radius.copy(),
                     mass=self.scene.mass.copy(), sphere_ids=self.sphere_ids.copy(),
                     time=self.time,
-                    vmax2=self._vmax2, totals=dict(self._totals),
+                    vmax2=self._vmax2, vmax2_loaded=self._vmax2_loaded,
+                    totals=dict(self._totals),
                     last_step=dict(self.last_step), n=self.n, precision=self.precision,
                     step_fraction=self.step_fraction, max_sweeps=self.max_sweeps,
                     warm=self._warm_rows() if self.n else None)
@@ -341,6 +345,7 @@ class Simulation:
                                  f"simulation's {mine!r}")
         self.set_state(ckpt["x"], ckpt["v"], ckpt["time"], ckpt.get("omega"))
         self._vmax2 = float(ckpt["vmax2"])
+        self._vmax2_loaded = float(ckpt.get("vmax2_loaded", ckpt["vmax2"]))
         if ckpt.get("warm") is not None and self._engine.solver is not None:
             self._engine.solver.load_warm(ckpt["warm"])
         self._totals.update(ckpt["totals"])
@@ -396,26 +401,45 @@ class Simulation:
         if last:
             h = remaining
         self.step(h)
+        if self._substeps and self.last_step["h"] < h:     # ended at an impact
+            last, h = False, self.last_step["h"]
         self.time = t_end if last or self.n == 0 else self.time + h
         return h
 
     def max_step(self) -> float:
-        """Largest h such that no sphere moves more than step_fraction * r_min [s]:
-        v_max h + g h^2/2 <= D, i.e. h = 2 D / (v_max + sqrt(v_max^2 + 2 g D))."""
+        """Largest h such that no sphere moves more than D = step_fraction * r_min [s]
+        (move_bound). With substeps (Rules.substeps, a contact solver) the largest h
+        such that no sphere the contact rows hold moves more than D, at most 2 D /
+        impact speed (and never less than without substeps): the fast spheres in
+        flight take substeps (stepping.Stepper.step)."""
+        h = self.move_bound(self._vmax2)
+        if self._substeps:
+            cap = 2.0 * self.step_fraction * self._r_min / self.rest_speed
+            h = max(h, min(cap, self.move_bound(self._vmax2_loaded)))
+        return h
+
+    def move_bound(self, vmax2: float) -> float:
+        """Largest h such that no sphere moves more than D = step_fraction * r_min [s]
+        at largest squared speed vmax2 [m^2/s^2]: v_max h + g h^2/2 <= D, i.e. h = 2 D /
+        (v_max + sqrt(v_max^2 + 2 g D))."""
         dist = self.step_fraction * self._r_min
-        vmax = math.sqrt(max(self._vmax2, 0.0))
+        vmax = math.sqrt(max(vmax2, 0.0))
         denom = vmax + math.sqrt(vmax * vmax + 2.0 * self._g * dist)
         return math.inf if denom == 0.0 else 2.0 * dist / denom
 
-    def step(self, h: float) -> None:
-        """One step of length h [s] (does not advance ``time``; use advance)."""
+    def step(self, h: float) -> float:
+        """One step of length h [s] (does not advance ``time``; use advance); returns
+        the length it took [s]: h, or less where its substeps (Rules.substeps) ended it
+        at an impact."""
         if self.n == 0:
-            return
+            return h
         self._check()
-        c, sweeps, remaining, overlap = self._stepper.step(h, self.max_sweeps)
-        self._book_step(c, h, sweeps, remaining, overlap)
+        c, sweeps, remaining, overlap = self._stepper.step(
+            h, self.max_sweeps, self.move_bound if self._substeps else None)
+        self._book_step(c, c.length, sweeps, remaining, overlap)
         if c.in_sinks > 0:
             self._discharge()
+        return c.length
 
     def _keep_spheres(self, ckpt: dict) -> None:
         """Continue with the spheres of a checkpoint taken after a discharge (their
@@ -450,7 +474,7 @@ class Simulation:
         self._parked = rows + (warm,)
         self._engine.release(self)
         if scene.n == 0:           # every sphere has left: time still runs, nothing moves
-            self._vmax2 = 0.0
+            self._vmax2 = self._vmax2_loaded = 0.0
             return
         self._bind()
         self._measure_vmax()
@@ -466,6 +490,7 @@ class Simulation:
         bound."""
         t = self._totals
         t["steps"] += 1
+        t["substeps"] += c.substeps
         t["sweeps"] += sweeps
         for name in self._SUMMED:
             t[name] += getattr(c, name)
@@ -474,6 +499,7 @@ class Simulation:
             t["sweep_limit_hits"] += 1
         t["max_overlap"] = max(t["max_overlap"], overlap)
         self._vmax2 = float(c.vmax2)
+        self._vmax2_loaded = float(c.vmax2_loaded)
         if self._engine.solver is not None:
             t["contact_steps"] += 1
             t["contact_residual"] = max(t["contact_residual"], float(c.contact_residual))
@@ -515,6 +541,7 @@ class Simulation:
         """The step bound's largest speed from the current velocities."""
         self._engine.motion.measure_vmax()
         self._vmax2 = float(self._engine.params.vmax2[None])
+        self._vmax2_loaded = self._vmax2      # (no rows solved yet: every sphere counts)
 
     # ---- introspection used by tests and tools ----
     def debug_view(self):

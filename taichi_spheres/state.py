@@ -135,6 +135,8 @@ class SphereState:
         hits: (N,) i32 — pair and wall collisions in the current step
         loaded: (N,) i32, only with features.contacts — 1 when a contact row of the
             sphere carried an impulse in the last step (contacts/solver.py)
+        near: (N,) i32, only with features.contacts — with Rules.substeps, 1 when the
+            sphere had a contact row in the last step (stepping.py)
         omega: (N,) vec3 real, only with features.friction — angular velocity [rad/s]
         material: (N,) i32, only with features.materials — material index (materials.py)
         n_spheres: () i32 — spheres of the bound scene
@@ -153,6 +155,7 @@ class SphereState:
         self.moved = ti.field(real, shape=capacity)
         self.hits = ti.field(ti.i32, shape=capacity)
         self.loaded = ti.field(ti.i32, shape=capacity) if features.contacts else None
+        self.near = ti.field(ti.i32, shape=capacity) if features.contacts else None
         self.omega = ti.Vector.field(3, real, shape=capacity) if features.friction else None
         self.material = ti.field(ti.i32, shape=capacity) if features.materials else None
         self.n_spheres = ti.field(ti.i32, shape=())

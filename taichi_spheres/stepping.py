@@ -11,6 +11,7 @@ one, the overlap projection (projection.py), and reads the step's counters back.
 from __future__ import annotations
 
 from .contacts import decode_status
+from .params import merge_substeps
 
 __all__ = ["KernelPath", "FusedPath", "Stepper"]
 
@@ -91,17 +92,25 @@ class Stepper:
     def fused(self) -> bool:
         return self.path.fused
 
-    def step(self, h: float, max_sweeps: int):
+    def step(self, h: float, max_sweeps: int, substep=None):
         """Run a step of length h [s]; returns (counters, sweeps, unresolved, overlap):
-        params.read_back, the sweeps, the approaching overlaps left, the largest
-        relative overlap after the step."""
+        params.read_back (with ``substeps``: how many drift/impact substeps ran), the
+        sweeps, the approaching overlaps left, the largest relative overlap after the
+        step. ``substep``: None, or (with a contact solver, Rules.substeps) a function
+        giving the longest substep [s] for a largest squared speed [m^2/s^2]: drift
+        and impacts then run in such substeps and the solver once, for all of h."""
         engine = self.sim._engine
-        sweeps = self.path.collide(h, max_sweeps)
+        before, substeps = None, 1
+        if substep is None:
+            sweeps = last = self.path.collide(h, max_sweeps)
+        else:
+            sweeps, last, before, substeps, h = self.collide_in_substeps(h, max_sweeps, substep)
         if engine.solver is not None:
-            if sweeps > 0:
+            engine.params.h[None] = h   # the solver's step (a substep's drift set its own)
+            if last > 0:
                 engine.grid.build()     # impacts moved spheres: bin them again
             engine.solver.solve()
-        c = engine.params.read_back()
+        c = merge_substeps(before, engine.params.read_back())
         self.check_rows(c)
         remaining = int(c.remaining)
         overlap = float(c.contact_overlap if engine.solver is not None else c.sep_overlap)
@@ -119,7 +128,35 @@ class Stepper:
             # the counters again: spheres the projection put back inside the box
             # count as wall events (and their energy), as in a fused step
             c = engine.params.read_back()
+        c.substeps, c.length = substeps, h
         return c, sweeps, remaining, overlap
+
+    def collide_in_substeps(self, h: float, max_sweeps: int, substep):
+        """Drift and impacts over at most h [s] in substeps, each as long as ``substep``
+        allows for the largest speed at its start, up to h or up to the end of the
+        first substep in which a sphere that had a contact row collided (the solver
+        then takes the spheres it set moving at once, as a step without substeps does;
+        a sphere without one was farther than the rows' margin from every other, more
+        than a sub-impact-speed approach closes in the step); returns (sweeps in all,
+        sweeps of the last substep, the counters of the substeps before the last
+        merged or None, substeps, the time they span [s])."""
+        params = self.sim._engine.params
+        done, sweeps, before, count = 0.0, 0, None, 0
+        vmax2 = self.sim._vmax2
+        while True:
+            left = h - done
+            length = substep(vmax2)
+            last = self.path.collide(left if length >= left else length, max_sweeps)
+            sweeps += last
+            count += 1
+            if length >= left:
+                return sweeps, last, before, count, h
+            c = params.read_back()
+            if c.near_hits > 0:
+                return sweeps, last, before, count, done + length
+            before = merge_substeps(before, c)
+            vmax2 = float(c.vmax2)
+            done += length
 
     def check_rows(self, c) -> None:
         """RuntimeError when the contact rows did not fit the solver's fields."""

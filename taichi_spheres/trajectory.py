@@ -244,9 +244,10 @@ class StepFrames:
 
     def _step_and_mark(self, h):
         self.flush()
-        self._step(h)
+        taken = self._step(h)
         self.steps += 1
         self.due = self.steps % self.every == 0
+        return taken
 
     def flush(self) -> None:
         """Write the frame that is due, if any."""

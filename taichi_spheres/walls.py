@@ -43,6 +43,7 @@ class Motion(Surfaces):
         self.real = state.real
         self.serial_light = serial_light
         self.max_bounces = tuning.physics.max_wall_bounces
+        self.substeps = tuning.physics.substeps and features.contacts
 
         # hot kernels as plain closures: a data_oriented method kernel pays ~40 us of
         # Python dispatch per launch for its `self` template argument
@@ -337,9 +338,13 @@ class Motion(Surfaces):
 
     @ti.func
     def count_hit(self, i):
-        """One more collision of sphere i in this step (counts spheres with several)."""
+        """One more collision of sphere i in this step (counts spheres with several,
+        and with Rules.substeps spheres that had a contact row: params.near_hits)."""
         if ti.atomic_add(self.state.hits[i], 1) == 1:
             ti.atomic_add(self.params.multi_collision_spheres[None], 1)
+        if ti.static(self.substeps):
+            if self.state.near[i] != 0:
+                ti.atomic_add(self.params.near_hits[None], 1)
 
     @ti.func
     def _drift_body(self):

@@ -99,3 +99,17 @@ def assert_same_counters(a: dict, b: dict, sim, parallel_sums: bool | None = Non
             assert b[key] == value, key
         else:
             assert b[key] == pytest.approx(value, rel=tol_for(sim, 1e-12, 1e2)), key
+
+
+def walled_gravity_gas():
+    """30 spheres of unequal masses (0.5-2 kg, radius 0.05 m) moving at 3 m/s in a
+    walled box under gravity (e = 0.7, wall e = 0.8), none resting in the first 0.5 s:
+    the scene the engine must follow the event-driven reference on (test_reference,
+    test_substeps)."""
+    from taichi_spheres.builders import gas
+    from taichi_spheres.scene import Scene
+    rng = np.random.default_rng(7)
+    base = gas(30, packing=0.05, radius=0.05, periodic=False, speed=3.0, seed=7)
+    return Scene.from_arrays(base.x, base.v, base.radius, mass=rng.uniform(0.5, 2.0, 30),
+                             box=(base.box_lo, base.box_hi), gravity=(0, 0, -9.81),
+                             restitution=0.7, wall_restitution=0.8)

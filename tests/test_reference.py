@@ -39,6 +39,7 @@ import math
 import numpy as np
 import pytest
 
+from conftest import walled_gravity_gas
 from taichi_spheres.builders import gas
 from taichi_spheres.reference import EventDrivenReference
 from taichi_spheres.scene import Scene
@@ -248,12 +249,8 @@ def test_walled_gravity_gas_agrees_with_engine_at_default_settings(arch):
     import taichi_spheres as ts
     if arch == "metal":
         pytest.skip("needs f64")
-    rng = np.random.default_rng(7)
-    base = gas(30, packing=0.05, radius=0.05, periodic=False, speed=3.0, seed=7)
-    scene = Scene.from_arrays(base.x, base.v, base.radius, mass=rng.uniform(0.5, 2.0, 30),
-                              box=(base.box_lo, base.box_hi), gravity=(0, 0, -G),
-                              restitution=0.7, wall_restitution=0.8)
-    L = float(base.box_size[0])
+    scene = walled_gravity_gas()
+    L = float(scene.box_size[0])
     sim = ts.Simulation(scene, arch=arch, precision="f64", step_fraction=0.01)
     assert sim.rest_speed > 0.1
     ref = EventDrivenReference(scene)

@@ -79,8 +79,8 @@ def silo_scene(x, v, omega, a, hole, radius=None):
 
 def engine_options(a) -> dict:
     """Simulation keywords of the command line: threads, step_fraction, the contact
-    solver's velocity and position sweep caps and over-relaxation (None: the defaults)
-    and its shock propagation pass."""
+    solver's velocity and position sweep caps and over-relaxation (None: the defaults),
+    its shock propagation pass, and substeps (Rules.substeps)."""
     tuning = Tuning()
     if a.relaxation is not None:
         tuning = tuning.with_(relaxation=a.relaxation)
@@ -90,6 +90,8 @@ def engine_options(a) -> dict:
         tuning = tuning.with_(position_iterations=a.position_sweeps)
     if a.shock:
         tuning = tuning.with_(shock_propagation="on")
+    if a.substeps:
+        tuning = tuning.with_(substeps=True)
     return dict(threads=a.threads, step_fraction=a.step_fraction, tuning=tuning)
 
 
@@ -180,6 +182,9 @@ def parse(argv=None):
                    help="the contact solver's over-relaxation (default: Rules')")
     p.add_argument("--shock", action="store_true",
                    help="switch on the contact solver's shock propagation pass")
+    p.add_argument("--substeps", action="store_true",
+                   help="drift and impacts in substeps, the contact solver once per step "
+                        "(Rules.substeps)")
     p.add_argument("--write", action="store_true", help="write docs/granular.md's section")
     p.add_argument("--no-write", dest="write", action="store_false")
     p.add_argument("--json", help="also write the results to this JSON file")

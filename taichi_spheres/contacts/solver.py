@@ -182,6 +182,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.h_prev[None] = 0
         self.warm_n.fill(0)
         self.state.loaded.fill(0)
+        self.state.near.fill(0)
         self.n = scene.n
 
     @ti.func
@@ -225,10 +226,11 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
     @ti.func
     def finish(self):
         """x += h w; book the energy the solve removed (kinetic, and the potential energy
-        of its moves), the largest speed and overlap; keep the impulses for the next
-        step's warm start (kernel top level)."""
+        of its moves), the largest speed (of all spheres, and of those a row holds) and
+        overlap; keep the impulses for the next step's warm start (kernel top level)."""
         h = self.params.h[None]
         self.params.vmax2[None] = 0      # measured again: the solve changed velocities
+        self.params.vmax2_loaded[None] = 0
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.state.n_spheres[None]):
             self.state.x[i] += h * self.w[i]
@@ -245,6 +247,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             ti.atomic_max(self.params.vmax2[None], self.state.v[i].norm_sqr())
             self.warm_n[i] = 0
             self.state.loaded[i] = 0
+            if ti.static(self.rules.substeps):
+                self.state.near[i] = 0
         ti.loop_config(serialize=ti.static(self.serial))
         for s in range(ti.min(self.n_rows[None], ti.static(self.capacity))):
             a = self.row_a[s]
@@ -255,8 +259,11 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             ti.atomic_max(self.params.contact_overlap[None], -gap / sigma)
             if self.lam[s] > 0:
                 self.state.loaded[a] = 1
+                speed2 = self.state.v[a].norm_sqr()
                 if self.row_b[s] >= 0:
                     self.state.loaded[self.row_b[s]] = 1
+                    speed2 = ti.max(speed2, self.state.v[self.row_b[s]].norm_sqr())
+                ti.atomic_max(self.params.vmax2_loaded[None], speed2)
                 t = ti.atomic_add(self.warm_n[a], 1)
                 if t < ti.static(self.perf.warm_slots):
                     self.warm_key[a, t] = self.row_b[s]
@@ -265,8 +272,26 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
                         self.warm_t[a, t] = self.lam_t[s]
                     if ti.static(self.f.rolling):
                         self.warm_r[a, t] = self.lam_r[s]
+        if ti.static(self.rules.substeps):
+            self.mark_near()
         self.h_prev[None] = h
         self.params.contacts[None] = self.n_rows[None]
+
+    @ti.func
+    def mark_near(self):
+        """state.near = 1 for the spheres with a row to a wall, to an object or to a
+        loaded sphere (or loaded themselves): those that can meet something slower
+        than the impact speed in the next step (stepping.Stepper.collide_in_substeps;
+        kernel top level, after the loop that sets state.loaded)."""
+        ti.loop_config(serialize=ti.static(self.serial))
+        for s in range(ti.min(self.n_rows[None], ti.static(self.capacity))):
+            a = self.row_a[s]
+            b = self.row_b[s]
+            if b < 0:
+                self.state.near[a] = 1
+            elif self.state.loaded[a] != 0 or self.state.loaded[b] != 0:
+                self.state.near[a] = 1
+                self.state.near[b] = 1
 
     def _build_kernels(self):
         """The kernels solve() launches (plain closures: no per-launch `self` dispatch)."""
@@ -384,6 +409,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         out = dict(key=self.warm_key.to_numpy()[:n], lam=self.warm_lam.to_numpy()[:n],
                    kept=self.warm_n.to_numpy()[:n], loaded=self.state.loaded.to_numpy()[:n],
                    h_prev=float(self.h_prev[None]))
+        if self.rules.substeps:
+            out["near"] = self.state.near.to_numpy()[:n]
         for name in ("warm_t", "warm_r"):
             if getattr(self, name) is not None:
                 out[name] = getattr(self, name).to_numpy()[:n]
@@ -399,6 +426,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         key[:n], lam[:n], kept[:n] = warm["key"], warm["lam"], warm["kept"]
         loaded[:n] = warm["loaded"]
         self.state.loaded.from_numpy(loaded)
+        if "near" in warm:
+            near = self.state.near.to_numpy()
+            near[:n] = warm["near"]
+            self.state.near.from_numpy(near)
         self.warm_key.from_numpy(key)
         self.warm_lam.from_numpy(lam)
         self.warm_n.from_numpy(kept)
