@@ -137,7 +137,8 @@ class Stepper:
         first substep in which a sphere that had a contact row collided (the solver
         then takes the spheres it set moving at once, as a step without substeps does;
         a sphere without one was farther than the rows' margin from every other, more
-        than a sub-impact-speed approach closes in the step); returns (sweeps in all,
+        than a sub-impact-speed approach closes in the step) or a sphere's centre
+        entered a sink (so that it leaves before it can fall through); returns (sweeps in all,
         sweeps of the last substep, the counters of the substeps before the last
         merged or None, substeps, the time they span [s])."""
         params = self.sim._engine.params
@@ -152,7 +153,7 @@ class Stepper:
             if length >= left:
                 return sweeps, last, before, count, h
             c = params.read_back()
-            if c.near_hits > 0:
+            if c.near_hits > 0 or c.in_sinks > 0:
                 return sweeps, last, before, count, done + length
             before = merge_substeps(before, c)
             vmax2 = float(c.vmax2)
