@@ -85,11 +85,10 @@ class Rules:
     projection_iterations: Jacobi iterations of the projection per step at most.
     projection_relaxation: fraction of every pair's overlap one iteration removes.
     substeps: with a contact solver, run drift and impacts in substeps, each bounded
-        as a step is (no sphere moves more than step_fraction x r_min), and the
-        contact solver once per step, whose length is then bounded by the impact
-        speed instead: at least 2 D / impact speed (D = step_fraction x r_min), within
-        which two spheres approaching slower than the impact speed close at most
-        2 D, as two spheres each moving D do in one step without substeps. A few fast
+        as a step is (no sphere moves more than D = step_fraction x r_min), and the
+        contact solver once per step, whose length only the spheres its rows held
+        bound (up to (contact_margin - 1) D / impact speed); a step ends early at a
+        collision of a sphere near a held one, a wall or an object. A few fast
         spheres in flight then no longer set how often a bed is solved
         (stepping.py, docs/algorithm.md "Substeps").
     """

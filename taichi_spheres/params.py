@@ -30,8 +30,9 @@ MAX_SINKS = 8
 #: pairs the projection pushed; of the contact solver (contacts/solver.py): its rows,
 #: velocity sweeps and position sweeps; spheres whose centre is in a sink at the end
 #: of the drift (simulation.py removes them); 1 if the solver scaled its warm start
-#: down (contacts/warm_energy.py); with Rules.substeps, collisions of spheres that had
-#: a contact row in the last solve (state.near; stepping.py ends the step at them).
+#: down (contacts/warm_energy.py); with Rules.substeps, collisions of spheres with a
+#: row to a wall, an object or a loaded sphere at the last solve (state.near;
+#: stepping.py ends the step at them).
 COUNTS = ("remaining", "pair_collisions", "wall_collisions", "wall_rests",
           "multi_collision_spheres", "collapse_collisions", "projected", "projected_pairs",
           "contacts", "contact_iterations", "position_iterations", "in_sinks",
@@ -42,16 +43,19 @@ COUNTS = ("remaining", "pair_collisions", "wall_collisions", "wall_rests",
 #: rule and the contact solver [J]; collisional virial sum r_ij . dp_i [J s]; of a
 #: fused step that projected: the largest relative overlap its last projection
 #: iteration measured; of the contact solver: the residual of its last velocity sweep
-#: [m/s], the largest relative overlap of its rows after the solve, and max |v|^2 of
-#: the spheres its rows hold (a row's impulse > 0) [m^2/s^2].
+#: [m/s], the largest relative overlap of its rows after the solve, and with
+#: Rules.substeps max |v|^2 of the spheres its rows held (a row impulse > 0)
+#: [m^2/s^2].
 VALUES = ("sep_overlap", "open_overlap", "vmax2", "moved", "energy_pair_restitution",
           "energy_wall_restitution", "energy_collapse", "energy_contacts", "virial",
-          "proj_worst", "contact_residual", "contact_overlap", "vmax2_loaded")
+          "proj_worst", "contact_residual", "contact_overlap", "vmax2_near")
 #: counters a step run in substeps (Rules.substeps) takes from its last substep (and
 #: the solve after it), and those it takes the largest of; the others add up
-LAST_OF_SUBSTEPS = ("in_sinks", "vmax2", "moved", "contact_residual", "contact_overlap",
-                    "vmax2_loaded")
-LARGEST_OF_SUBSTEPS = ("sep_overlap", "open_overlap", "proj_worst")
+#: (an approaching overlap a substep left is found again by the next one: "remaining"
+#: and "open_overlap" are the last substep's)
+LAST_OF_SUBSTEPS = ("remaining", "open_overlap", "in_sinks", "vmax2", "moved",
+                    "contact_residual", "contact_overlap", "vmax2_near")
+LARGEST_OF_SUBSTEPS = ("sep_overlap", "proj_worst")
 
 
 def merge_substeps(before, last):

@@ -326,7 +326,7 @@ class Simulation:
         return dict(x=st.x, v=st.v, omega=st.omega, radius=self.scene.radius.copy(),
                     mass=self.scene.mass.copy(), sphere_ids=self.sphere_ids.copy(),
                     time=self.time,
-                    vmax2=self._vmax2, vmax2_loaded=self._vmax2_loaded,
+                    vmax2=self._vmax2, vmax2_near=self._vmax2_near,
                     totals=dict(self._totals),
                     last_step=dict(self.last_step), n=self.n, precision=self.precision,
                     step_fraction=self.step_fraction, max_sweeps=self.max_sweeps,
@@ -345,7 +345,11 @@ class Simulation:
                                  f"simulation's {mine!r}")
         self.set_state(ckpt["x"], ckpt["v"], ckpt["time"], ckpt.get("omega"))
         self._vmax2 = float(ckpt["vmax2"])
-        self._vmax2_loaded = float(ckpt.get("vmax2_loaded", ckpt["vmax2"]))
+        warm = ckpt.get("warm")
+        substeps_ready = warm is None or "near" in warm or not self._substeps
+        # a checkpoint of a run without substeps: every sphere counts as near
+        self._vmax2_near = float(ckpt.get("vmax2_near", ckpt["vmax2"])) \
+            if substeps_ready else self._vmax2
         if ckpt.get("warm") is not None and self._engine.solver is not None:
             self._engine.solver.load_warm(ckpt["warm"])
         self._totals.update(ckpt["totals"])
@@ -409,13 +413,15 @@ class Simulation:
     def max_step(self) -> float:
         """Largest h such that no sphere moves more than D = step_fraction * r_min [s]
         (move_bound). With substeps (Rules.substeps, a contact solver) the largest h
-        such that no sphere the contact rows hold moves more than D, at most 2 D /
-        impact speed (and never less than without substeps): the fast spheres in
-        flight take substeps (stepping.Stepper.step)."""
+        such that no sphere within the contact rows' margin (contact_margin x D) of
+        something moves more than D, at most (contact_margin - 1) D / impact speed
+        (never less than without substeps): the spheres in flight far from everything
+        take substeps (stepping.Stepper.step; docs/algorithm.md, "Substeps")."""
         h = self.move_bound(self._vmax2)
         if self._substeps:
-            cap = 2.0 * self.step_fraction * self._r_min / self.rest_speed
-            h = max(h, min(cap, self.move_bound(self._vmax2_loaded)))
+            reach = self.tuning.physics.contact_margin - 1.0
+            cap = reach * self.step_fraction * self._r_min / self.rest_speed
+            h = max(h, min(cap, self.move_bound(self._vmax2_near)))
         return h
 
     def move_bound(self, vmax2: float) -> float:
@@ -474,10 +480,13 @@ class Simulation:
         self._parked = rows + (warm,)
         self._engine.release(self)
         if scene.n == 0:           # every sphere has left: time still runs, nothing moves
-            self._vmax2 = self._vmax2_loaded = 0.0
+            self._vmax2 = self._vmax2_near = 0.0
             return
         self._bind()
+        near = self._vmax2_near
         self._measure_vmax()
+        # fewer spheres (and recycled ones at rest): the bound can only go down
+        self._vmax2_near = min(near, self._vmax2)
 
     #: stats totals that add up the step counter of the same name (params.COUNTS/VALUES)
     _SUMMED = ("pair_collisions", "wall_collisions", "wall_rests", "multi_collision_spheres",
@@ -499,7 +508,7 @@ class Simulation:
             t["sweep_limit_hits"] += 1
         t["max_overlap"] = max(t["max_overlap"], overlap)
         self._vmax2 = float(c.vmax2)
-        self._vmax2_loaded = float(c.vmax2_loaded)
+        self._vmax2_near = float(c.vmax2_near)
         if self._engine.solver is not None:
             t["contact_steps"] += 1
             t["contact_residual"] = max(t["contact_residual"], float(c.contact_residual))
@@ -541,7 +550,7 @@ class Simulation:
         """The step bound's largest speed from the current velocities."""
         self._engine.motion.measure_vmax()
         self._vmax2 = float(self._engine.params.vmax2[None])
-        self._vmax2_loaded = self._vmax2      # (no rows solved yet: every sphere counts)
+        self._vmax2_near = self._vmax2      # (no rows solved yet: every sphere counts)
 
     # ---- introspection used by tests and tools ----
     def debug_view(self):

@@ -136,7 +136,8 @@ class SphereState:
         loaded: (N,) i32, only with features.contacts — 1 when a contact row of the
             sphere carried an impulse in the last step (contacts/solver.py)
         near: (N,) i32, only with features.contacts — with Rules.substeps, 1 when the
-            sphere had a contact row in the last step (stepping.py)
+            sphere had a contact row to a wall, an object or a loaded sphere (or was
+            loaded) at the last solve (ContactSolver.mark_near; stepping.py)
         omega: (N,) vec3 real, only with features.friction — angular velocity [rad/s]
         material: (N,) i32, only with features.materials — material index (materials.py)
         n_spheres: () i32 — spheres of the bound scene

@@ -431,7 +431,9 @@ def test_bounded_warm_start_adds_no_energy_after_a_heavy_impact(arch, bounded, s
     the split impulse lifting the block off the floor) and the solver counts the steps
     it scaled; the plain warm start grows it by more than a tenth of that energy in one
     step (what the bound is for). The bound holds as well in substeps (Rules.substeps:
-    the solver's steps are longer)."""
+    the solver's steps are longer, and the position pass also separates spheres the
+    solve's position update pushed into a neighbour about to hit them, which lifts a
+    little more: 2e-3 of the impact energy at most)."""
     tuning = Tuning().with_(relaxation=1.8, contact_iterations=40, position_iterations=40,
                             bounded_warm_start=bounded, substeps=substeps)
     scene = fcc_block(4)
@@ -444,7 +446,7 @@ def test_bounded_warm_start_adds_no_energy_after_a_heavy_impact(arch, bounded, s
     growth = np.diff(_energies_by_step(sim, 120)).max()
     assert sim.stats["pair_collisions"] > 0
     if bounded == "auto":     # no friction: on
-        assert growth <= 1e-3 * impact
+        assert growth <= (2e-3 if substeps else 1e-3) * impact
         assert sim.stats["warm_starts_scaled"] > 0
     else:
         assert growth > 0.1 * impact

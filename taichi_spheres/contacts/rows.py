@@ -40,7 +40,10 @@ class ContactRows:
         if dd < reach * reach and dd > 0:
             dist = ti.sqrt(dd)
             un = (vi - self.state.v[j]).dot(d) / dist
-            if dist < sigma or un >= -self.pairs.motion.pair_impact_speed(i, j):
+            # with substeps an impact to come gets a row too, for the position pass only
+            # (prepare_rows: inert_impact_row)
+            if ti.static(self.rules.substeps) or dist < sigma or \
+                    un >= -self.pairs.motion.pair_impact_speed(i, j):
                 cj = self.grid.coords(self.grid.cell_of[j])
                 owner = self.grid.linear(self.grid.owner(ci, cj))
                 self.record(owner, ti.min(i, j), ti.max(i, j), fill)
@@ -149,7 +152,9 @@ class ContactRows:
 
     @ti.func
     def gather(self):
-        """Count, place and sort the rows of the bound grid (kernel top level)."""
+        """Count, place and sort the rows of the bound grid (kernel top level); with
+        Rules.substeps, state.near = 1 for the spheres within the margin of another
+        sphere, a wall or an object (stepping.Stepper.collide_in_substeps)."""
         ti.loop_config(serialize=ti.static(self.serial))
         for k in range(self.grid.n_cells[None]):
             self.cell_count[k] = 0
@@ -228,6 +233,26 @@ class ContactRows:
                     self.lam_r[s] = self.clamped(self.warm_r[a, t] * scale, self.rolling_limit(s))
 
     @ti.func
+    def inert_impact_row(self, s, n, gap):
+        """With Rules.substeps, pair rows are also gathered for impacts to come (apart,
+        approaching at or above the pair's impact speed: the impact pass collides them
+        exactly). Their velocity row is made inert (target -inf, no impulse), so only
+        the position pass sees them: where the solve's position update (the
+        trapezoidal move) pushes a sphere it stopped into such a neighbour, which the
+        longer steps of substeps make deep enough to matter."""
+        a = self.row_a[s]
+        b = self.row_b[s]
+        if b >= 0 and gap > 0:
+            un = (self.state.v[a] - self.state.v[b]).dot(n)
+            if un < -self.pairs.motion.pair_impact_speed(a, b):
+                self.target[s] = -ti.cast(1e30, self.real)
+                self.lam[s] = 0
+                if ti.static(self.f.friction):
+                    self.lam_t[s] = ti.Vector.zero(self.real, 3)
+                if ti.static(self.f.rolling):
+                    self.lam_r[s] = ti.Vector.zero(self.real, 3)
+
+    @ti.func
     def prepare_rows(self):
         """Geometry, targets and warm impulses of every row; v_pre (kernel top level)."""
         h = self.params.h[None]
@@ -246,6 +271,8 @@ class ContactRows:
                 self.lam_r[s] = ti.Vector.zero(self.real, 3)
             if ti.static(self.rules.warm_start):
                 self.warm_row(s)
+            if ti.static(self.rules.substeps):
+                self.inert_impact_row(s, n, gap)
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.state.n_spheres[None]):
             self.v_pre[i] = self.state.v[i]

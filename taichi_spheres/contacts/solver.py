@@ -226,11 +226,11 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
     @ti.func
     def finish(self):
         """x += h w; book the energy the solve removed (kinetic, and the potential energy
-        of its moves), the largest speed (of all spheres, and of those a row holds) and
-        overlap; keep the impulses for the next step's warm start (kernel top level)."""
+        of its moves), the largest speed (of all spheres, and with Rules.substeps of
+        those within the rows' margin of something: state.near) and overlap; keep the impulses for the next step's warm start (kernel top level)."""
         h = self.params.h[None]
         self.params.vmax2[None] = 0      # measured again: the solve changed velocities
-        self.params.vmax2_loaded[None] = 0
+        self.params.vmax2_near[None] = 0
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.state.n_spheres[None]):
             self.state.x[i] += h * self.w[i]
@@ -259,11 +259,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             ti.atomic_max(self.params.contact_overlap[None], -gap / sigma)
             if self.lam[s] > 0:
                 self.state.loaded[a] = 1
-                speed2 = self.state.v[a].norm_sqr()
                 if self.row_b[s] >= 0:
                     self.state.loaded[self.row_b[s]] = 1
-                    speed2 = ti.max(speed2, self.state.v[self.row_b[s]].norm_sqr())
-                ti.atomic_max(self.params.vmax2_loaded[None], speed2)
                 t = ti.atomic_add(self.warm_n[a], 1)
                 if t < ti.static(self.perf.warm_slots):
                     self.warm_key[a, t] = self.row_b[s]
@@ -279,10 +276,11 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
 
     @ti.func
     def mark_near(self):
-        """state.near = 1 for the spheres with a row to a wall, to an object or to a
-        loaded sphere (or loaded themselves): those that can meet something slower
-        than the impact speed in the next step (stepping.Stepper.collide_in_substeps;
-        kernel top level, after the loop that sets state.loaded)."""
+        """With Rules.substeps: state.near = 1 for the spheres with a row to a wall, an
+        object or a loaded sphere (or loaded themselves), the spheres that can meet
+        something slower than the impact speed; params.vmax2_near = the largest |v|^2
+        of the loaded ones (stepping.Stepper.collide_in_substeps; kernel top level,
+        after the loop that sets state.loaded)."""
         ti.loop_config(serialize=ti.static(self.serial))
         for s in range(ti.min(self.n_rows[None], ti.static(self.capacity))):
             a = self.row_a[s]
@@ -292,6 +290,11 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             elif self.state.loaded[a] != 0 or self.state.loaded[b] != 0:
                 self.state.near[a] = 1
                 self.state.near[b] = 1
+            if self.lam[s] > 0:
+                speed2 = self.state.v[a].norm_sqr()
+                if b >= 0:
+                    speed2 = ti.max(speed2, self.state.v[b].norm_sqr())
+                ti.atomic_max(self.params.vmax2_near[None], speed2)
 
     def _build_kernels(self):
         """The kernels solve() launches (plain closures: no per-launch `self` dispatch)."""
@@ -426,9 +429,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         key[:n], lam[:n], kept[:n] = warm["key"], warm["lam"], warm["kept"]
         loaded[:n] = warm["loaded"]
         self.state.loaded.from_numpy(loaded)
-        if "near" in warm:
+        if self.rules.substeps:      # (a table without: every sphere counts as near)
             near = self.state.near.to_numpy()
-            near[:n] = warm["near"]
+            near[:n] = warm["near"] if "near" in warm else 1
             self.state.near.from_numpy(near)
         self.warm_key.from_numpy(key)
         self.warm_lam.from_numpy(lam)
