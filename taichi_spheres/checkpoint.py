@@ -41,6 +41,7 @@ def save(path, sim, scene, frame, fps) -> None:
     """Write the checkpoint atomically (temporary file, then rename)."""
     ck = sim.checkpoint()
     meta = dict(time=ck["time"], vmax2=ck["vmax2"], vmax2_near=ck["vmax2_near"],
+                stuck_in_sinks=ck["stuck_in_sinks"],
                 totals=ck["totals"],
                 last_step=ck["last_step"], n=ck["n"], precision=ck["precision"],
                 step_fraction=ck["step_fraction"], max_sweeps=ck["max_sweeps"],

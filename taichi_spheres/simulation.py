@@ -189,6 +189,8 @@ class Simulation:
                                        self.geometry.n_cells)
         self._parked = (scene.x, scene.v, _scene_spins(scene), None)
         self._bind()
+        #: spheres left in sinks by the last discharge (recycled, no free spot found)
+        self._stuck_in_sinks = 0
         #: drift and impacts in substeps, the contact solver once per step (Rules.substeps)
         self._substeps = bool(self.tuning.physics.substeps and self._engine.solver is not None
                               and self.rest_speed > 0)
@@ -327,6 +329,7 @@ class Simulation:
                     mass=self.scene.mass.copy(), sphere_ids=self.sphere_ids.copy(),
                     time=self.time,
                     vmax2=self._vmax2, vmax2_near=self._vmax2_near,
+                    stuck_in_sinks=self._stuck_in_sinks,
                     totals=dict(self._totals),
                     last_step=dict(self.last_step), n=self.n, precision=self.precision,
                     step_fraction=self.step_fraction, max_sweeps=self.max_sweeps,
@@ -350,6 +353,7 @@ class Simulation:
         # a checkpoint of a run without substeps: every sphere counts as near
         self._vmax2_near = float(ckpt.get("vmax2_near", ckpt["vmax2"])) \
             if substeps_ready else self._vmax2
+        self._stuck_in_sinks = int(ckpt.get("stuck_in_sinks", 0))
         if ckpt.get("warm") is not None and self._engine.solver is not None:
             self._engine.solver.load_warm(ckpt["warm"])
         self._totals.update(ckpt["totals"])
@@ -487,6 +491,9 @@ class Simulation:
         self._measure_vmax()
         # fewer spheres (and recycled ones at rest): the bound can only go down
         self._vmax2_near = min(near, self._vmax2)
+        # recycled spheres that found no free spot stay in their sink: substeps end a
+        # step only where more spheres than these are in sinks
+        self._stuck_in_sinks = int(discharge.in_sinks(rows[0], scene.sinks, dtype).sum())
 
     #: stats totals that add up the step counter of the same name (params.COUNTS/VALUES)
     _SUMMED = ("pair_collisions", "wall_collisions", "wall_rests", "multi_collision_spheres",

@@ -138,7 +138,8 @@ class Stepper:
         then takes the spheres it set moving at once, as a step without substeps does;
         a sphere without one was farther than the rows' margin from every other, more
         than a sub-impact-speed approach closes in the step) or a sphere's centre
-        entered a sink (so that it leaves before it can fall through); returns (sweeps in all,
+        entered a sink (so that it leaves before it can fall through; spheres a recycle
+        sink kept for want of a free spot do not count); returns (sweeps in all,
         sweeps of the last substep, the counters of the substeps before the last
         merged or None, substeps, the time they span [s])."""
         params = self.sim._engine.params
@@ -153,7 +154,7 @@ class Stepper:
             if length >= left:
                 return sweeps, last, before, count, h
             c = params.read_back()
-            if c.near_hits > 0 or c.in_sinks > 0:
+            if c.near_hits > 0 or c.in_sinks > self.sim._stuck_in_sinks:
                 return sweeps, last, before, count, done + length
             before = merge_substeps(before, c)
             vmax2 = float(c.vmax2)
