@@ -1,6 +1,8 @@
-"""The energy-measuring tools (tools/warm_start_energy.py, tools/bed_energy.py): bad
-options are usage errors before any run, and their tables say what was measured. No
-timings or measured values are asserted (the tools are the measurement)."""
+"""The energy- and overlap-measuring tools (tools/warm_start_energy.py,
+tools/bed_energy.py, tools/step_overlaps.py): bad options are usage errors before any
+run, and their tables say what was measured. No timings or measured values are
+asserted (the tools are the measurement)."""
+import argparse
 import os
 import sys
 
@@ -9,6 +11,7 @@ import pytest
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
 
 import bed_energy  # noqa: E402  (tools/bed_energy.py)
+import step_overlaps  # noqa: E402  (tools/step_overlaps.py)
 import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
 
 
@@ -37,3 +40,23 @@ def test_bed_energy_table_quotes_lammps_from_its_stored_run():
         in text
     # the stored LAMMPS pour (docs/peer_lammps_pour_lammps.json) has both phase ends
     assert "at 1 s" in text and "at 2 s" in text and "LAMMPS" in text
+
+
+@pytest.mark.parametrize("argv", [["--start", "2"], ["--every", "0"], ["--duration", "-1"]])
+def test_step_overlaps_refuses_bad_options(argv, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        step_overlaps.main(argv)
+    assert exit_info.value.code == 2
+    assert "--start < --duration" in capsys.readouterr().err
+
+
+def test_step_overlaps_table_names_the_command_and_both_settings():
+    args = argparse.Namespace(scene="scenes/pour.toml", start=1.0, duration=2.0, every=1,
+                              write=True, section="step-overlaps-bed")
+    row = dict(brute=6.6e-4, when=1.138, reported=6.6e-4, steps=2008, substeps=2008)
+    text = step_overlaps.report(args, {"defaults": row, "substeps": dict(row, substeps=3000)})
+    assert "`python tools/step_overlaps.py --start 1 --every 1 --section step-overlaps-bed " \
+        "--write`" in text
+    assert "| defaults | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 2008 |" in text
+    assert "| substeps | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 3000 |" in text
+
