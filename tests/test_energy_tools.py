@@ -15,13 +15,18 @@ import step_overlaps  # noqa: E402  (tools/step_overlaps.py)
 import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
 
 
-@pytest.mark.parametrize("argv", [["--ratios", "0"], ["--frictions", "-0.1"],
-                                  ["--steps", "0"]])
-def test_warm_start_energy_refuses_bad_options(argv, capsys):
+@pytest.mark.parametrize("tool, argv, words", [
+    (warm_start_energy, ["--ratios", "0"], "ratios must be > 0"),
+    (warm_start_energy, ["--frictions", "-0.1"], "frictions >= 0"),
+    (warm_start_energy, ["--steps", "0"], "steps >= 1"),
+    (step_overlaps, ["--start", "2"], "--start < --duration"),
+    (step_overlaps, ["--every", "0"], "--every >= 1"),
+    (step_overlaps, ["--duration", "-1"], "--start < --duration")])
+def test_tools_refuse_bad_options(tool, argv, words, capsys):
     with pytest.raises(SystemExit) as exit_info:
-        warm_start_energy.main(argv)
+        tool.main(argv)
     assert exit_info.value.code == 2
-    assert "ratios must be > 0" in capsys.readouterr().err
+    assert words in capsys.readouterr().err
 
 
 def test_warm_start_energy_table_has_a_row_per_case():
@@ -40,14 +45,6 @@ def test_bed_energy_table_quotes_lammps_from_its_stored_run():
         in text
     # the stored LAMMPS pour (docs/peer_lammps_pour_lammps.json) has both phase ends
     assert "at 1 s" in text and "at 2 s" in text and "LAMMPS" in text
-
-
-@pytest.mark.parametrize("argv", [["--start", "2"], ["--every", "0"], ["--duration", "-1"]])
-def test_step_overlaps_refuses_bad_options(argv, capsys):
-    with pytest.raises(SystemExit) as exit_info:
-        step_overlaps.main(argv)
-    assert exit_info.value.code == 2
-    assert "--start < --duration" in capsys.readouterr().err
 
 
 def test_step_overlaps_table_names_the_command_and_both_settings():
