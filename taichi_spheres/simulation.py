@@ -417,10 +417,10 @@ class Simulation:
     def max_step(self) -> float:
         """Largest h such that no sphere moves more than D = step_fraction * r_min [s]
         (move_bound). With substeps (Rules.substeps, a contact solver) the largest h
-        such that no sphere within the contact rows' margin (contact_margin x D) of
-        something moves more than D, at most (contact_margin - 1) D / impact speed
-        (never less than without substeps): the spheres in flight far from everything
-        take substeps (stepping.Stepper.step; docs/algorithm.md, "Substeps")."""
+        such that no sphere the contact rows held in the last step (a row impulse > 0)
+        moves more than D, at most (contact_margin - 1) D / impact speed (never less
+        than without substeps): the other spheres take substeps
+        (stepping.Stepper.step; docs/algorithm.md, "Substeps")."""
         h = self.move_bound(self._vmax2)
         if self._substeps:
             reach = self.tuning.physics.contact_margin - 1.0

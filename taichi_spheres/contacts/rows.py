@@ -62,9 +62,11 @@ class ContactRows:
                 hi_gap = self.params.hi[None][a] - xi[a] - ri
                 lo_imp = self.pairs.motion.wall_impact_speed(i, g_a)
                 hi_imp = self.pairs.motion.wall_impact_speed(i, -g_a)
-                if lo_gap < self.margin[None] and (lo_gap < 0 or -vi[a] <= lo_imp):
+                # with substeps impacts to come get rows too (inert_impact_row)
+                sub = ti.static(self.rules.substeps)
+                if lo_gap < self.margin[None] and (sub or lo_gap < 0 or -vi[a] <= lo_imp):
                     self.record(k, i, -1 - 2 * a, fill)
-                if hi_gap < self.margin[None] and (hi_gap < 0 or vi[a] <= hi_imp):
+                if hi_gap < self.margin[None] and (sub or hi_gap < 0 or vi[a] <= hi_imp):
                     self.record(k, i, -2 - 2 * a, fill)
 
     @ti.func
@@ -78,7 +80,8 @@ class ContactRows:
                 acc = ti.cast(0, self.real)
                 if ti.static(self.f.gravity):
                     acc = self.params.gravity[None].dot(n)
-                if gap < 0 or -vi.dot(n) <= motion.wall_impact_speed(i, acc):
+                if ti.static(self.rules.substeps) or gap < 0 or \
+                        -vi.dot(n) <= motion.wall_impact_speed(i, acc):
                     self.record(k, i, -1 - GEOMETRY_ROWS - g, fill)
 
     @ti.func
@@ -234,17 +237,27 @@ class ContactRows:
 
     @ti.func
     def inert_impact_row(self, s, n, gap):
-        """With Rules.substeps, pair rows are also gathered for impacts to come (apart,
-        approaching at or above the pair's impact speed: the impact pass collides them
-        exactly). Their velocity row is made inert (target -inf, no impulse), so only
-        the position pass sees them: where the solve's position update (the
-        trapezoidal move) pushes a sphere it stopped into such a neighbour, which the
-        longer steps of substeps make deep enough to matter."""
+        """With Rules.substeps, rows are also gathered for impacts to come (a pair, wall
+        or object apart, approached at or above its impact speed: the impact pass
+        collides them exactly). Their velocity row is made inert (target -inf, no
+        impulse), so only the position pass sees them: where the solve's position
+        update (the trapezoidal move) pushes a sphere it stopped into such a
+        neighbour or wall, which the longer steps of substeps make deep enough to
+        matter."""
         a = self.row_a[s]
         b = self.row_b[s]
-        if b >= 0 and gap > 0:
-            un = (self.state.v[a] - self.state.v[b]).dot(n)
-            if un < -self.pairs.motion.pair_impact_speed(a, b):
+        if gap > 0:
+            un = self.state.v[a].dot(n)
+            impact = ti.cast(0, self.real)
+            if b >= 0:
+                un -= self.state.v[b].dot(n)
+                impact = self.pairs.motion.pair_impact_speed(a, b)
+            else:
+                acc = ti.cast(0, self.real)
+                if ti.static(self.f.gravity):
+                    acc = self.params.gravity[None].dot(n)
+                impact = self.pairs.motion.wall_impact_speed(a, acc)
+            if un < -impact:
                 self.target[s] = -ti.cast(1e30, self.real)
                 self.lam[s] = 0
                 if ti.static(self.f.friction):
