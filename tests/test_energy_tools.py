@@ -1,5 +1,5 @@
-"""The energy- and overlap-measuring tools (tools/warm_start_energy.py,
-tools/bed_energy.py, tools/step_overlaps.py): bad options are usage errors before any
+"""The energy-, overlap- and rate-measuring tools (tools/warm_start_energy.py,
+tools/bed_energy.py, tools/step_overlaps.py, tools/silo_seeds.py): bad options are usage errors before any
 run, and their tables say what was measured. No timings or measured values are
 asserted (the tools are the measurement)."""
 import argparse
@@ -11,6 +11,7 @@ import pytest
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
 
 import bed_energy  # noqa: E402  (tools/bed_energy.py)
+import silo_seeds  # noqa: E402  (tools/silo_seeds.py)
 import step_overlaps  # noqa: E402  (tools/step_overlaps.py)
 import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
 
@@ -21,7 +22,8 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (warm_start_energy, ["--steps", "0"], "steps >= 1"),
     (step_overlaps, ["--start", "2"], "--start < --duration"),
     (step_overlaps, ["--every", "0"], "--every >= 1"),
-    (step_overlaps, ["--duration", "-1"], "--start < --duration")])
+    (step_overlaps, ["--duration", "-1"], "--start < --duration"),
+    (silo_seeds, ["--seeds", "1"], "at least two seeds")])
 def test_tools_refuse_bad_options(tool, argv, words, capsys):
     with pytest.raises(SystemExit) as exit_info:
         tool.main(argv)
@@ -56,4 +58,11 @@ def test_step_overlaps_table_names_the_command_and_both_settings():
         "--write`" in text
     assert "| defaults | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 2008 |" in text
     assert "| substeps | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 3000 |" in text
+
+
+def test_silo_seeds_table_gives_each_rate_and_the_spread():
+    text = silo_seeds.report([1, 2], {"defaults": [0.16, 0.15], "substeps": [0.14, 0.15]})
+    assert "`python tools/silo_seeds.py --seeds 1 2`" in text
+    assert "| defaults | 0.1600 | 0.1500 | 0.1550 | 0.0071 |" in text
+    assert "| substeps | 0.1400 | 0.1500 | 0.1450 | 0.0071 |" in text
 
