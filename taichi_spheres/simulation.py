@@ -354,8 +354,8 @@ class Simulation:
         self._vmax2_near = float(ckpt.get("vmax2_near", ckpt["vmax2"])) \
             if substeps_ready else self._vmax2
         self._stuck_in_sinks = int(ckpt.get("stuck_in_sinks", 0))
-        if ckpt.get("warm") is not None and self._engine.solver is not None:
-            self._engine.solver.load_warm(ckpt["warm"])
+        if warm is not None and self._engine.solver is not None:
+            self._engine.solver.load_warm(warm)
         self._totals.update(ckpt["totals"])
         self.last_step = dict(ckpt["last_step"])
 

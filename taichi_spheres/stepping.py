@@ -106,7 +106,8 @@ class Stepper:
         else:
             sweeps, last, before, substeps, h = self.collide_in_substeps(h, max_sweeps, substep)
         if engine.solver is not None:
-            engine.params.h[None] = h   # the solver's step (a substep's drift set its own)
+            if substep is not None:     # the solver's step (each substep set its own)
+                engine.params.h[None] = h
             if last > 0:
                 engine.grid.build()     # impacts moved spheres: bin them again
             engine.solver.solve()

@@ -155,9 +155,7 @@ class ContactRows:
 
     @ti.func
     def gather(self):
-        """Count, place and sort the rows of the bound grid (kernel top level); with
-        Rules.substeps, state.near = 1 for the spheres within the margin of another
-        sphere, a wall or an object (stepping.Stepper.collide_in_substeps)."""
+        """Count, place and sort the rows of the bound grid (kernel top level)."""
         ti.loop_config(serialize=ti.static(self.serial))
         for k in range(self.grid.n_cells[None]):
             self.cell_count[k] = 0

@@ -226,11 +226,12 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
     @ti.func
     def finish(self):
         """x += h w; book the energy the solve removed (kinetic, and the potential energy
-        of its moves), the largest speed (of all spheres, and with Rules.substeps of
-        those within the rows' margin of something: state.near) and overlap; keep the impulses for the next step's warm start (kernel top level)."""
+        of its moves), the largest speed and overlap; keep the impulses for the next
+        step's warm start; with Rules.substeps, mark_near (kernel top level)."""
         h = self.params.h[None]
         self.params.vmax2[None] = 0      # measured again: the solve changed velocities
-        self.params.vmax2_near[None] = 0
+        if ti.static(self.rules.substeps):
+            self.params.vmax2_near[None] = 0
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.state.n_spheres[None]):
             self.state.x[i] += h * self.w[i]
