@@ -5,7 +5,8 @@ floor and ceiling, unequal radii and masses) is run for a fixed time and the bit
 its final positions and velocities are hashed (``observe.state_digest``). The digests
 in ``tests/same_bits.json`` were computed by ``python tools/state_digest.py --write``;
 every CPU (any x86-64 model, with or without AVX-512 and FMA; ARM), both compile
-modes, the fused step and the per-colour parallel launches must reproduce them. A
+modes, the fused step and the per-colour parallel launches must reproduce them (the
+"substeps" case: the small one with Rules.substeps). A
 change of the physics changes them on purpose: store the new ones with that command
 and say why in the commit.
 
@@ -34,6 +35,7 @@ def _digest(case, precision, arch="cpu", **kw):
     stored = STORED[case]
     scene = same_bits_scene(stored["n"], stored.get("frictional", False),
                             stored.get("materials", False))
+    kw["tuning"] = kw.get("tuning", DEFAULT).with_(**stored.get("tuning", {}))
     sim = ts.Simulation(scene, arch=arch, precision=precision, **kw)
     sim.advance(STORED[case]["duration"])
     return ts.observe.state_digest(sim.state(), precision), sim
@@ -45,7 +47,7 @@ def _cpu_only(arch):
                     "their runs with each other)")
 
 
-@pytest.mark.parametrize("case", ["small", "large", "frictional", "materials"])
+@pytest.mark.parametrize("case", ["small", "large", "frictional", "materials", "substeps"])
 def test_reference_scenes_give_the_stored_digests(arch, precision, case):
     _cpu_only(arch)
     digest, sim = _digest(case, precision)
@@ -53,7 +55,7 @@ def test_reference_scenes_give_the_stored_digests(arch, precision, case):
     assert digest == STORED[case]["digests"][precision]
 
 
-@pytest.mark.parametrize("case", ["small", "frictional", "materials"])
+@pytest.mark.parametrize("case", ["small", "frictional", "materials", "substeps"])
 def test_fused_step_gives_the_stored_digest(arch, case):
     _cpu_only(arch)
     digest, sim = _digest(case, "f64", fused=True)

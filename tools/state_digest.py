@@ -8,7 +8,7 @@ colour launches. This script runs ``builders.same_bits_scene(n)`` for each case 
 the floor; "large": 3,000 spheres, where detection keeps near lists and sweeps can
 launch per colour; "frictional": the small case with friction, spin and a post of
 static geometry; "materials": the frictional case with every other sphere of a
-second material) and prints the digest of the final positions and velocities
+second material; "substeps": the small case with Rules.substeps) and prints the digest of the final positions and velocities
 (``observe.state_digest``) with the collision counts, for each path asked for, and
 whether it matches the digest stored there (``tests/test_same_bits.py`` holds the
 engine to it).
@@ -32,7 +32,7 @@ import sys
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 STORED = os.path.join(ROOT, "tests", "same_bits.json")
 PATHS = ("default", "fused", "parallel")
-CASES = ["small", "large", "frictional", "materials"]
+CASES = ["small", "large", "frictional", "materials", "substeps"]
 
 
 def load_stored() -> dict:
@@ -53,6 +53,7 @@ def run_path(case: dict, precision: str, path: str, threads=None, compile=None) 
     runtime.ensure("cpu", precision, threads=threads, compile=compile)
     tuning = DEFAULT.with_(few_pairs=-1, serial_resolve_pairs=-1) if path == "parallel" \
         else DEFAULT
+    tuning = tuning.with_(**case.get("tuning", {}))
     sim = ts.Simulation(same_bits_scene(case["n"], case.get("frictional", False),
                                         case.get("materials", False)),
                         precision=precision, threads=threads,
