@@ -109,23 +109,23 @@ def fcc_block(cells=(5, 5, 10), radius=0.01, spacing=1.0 + 1e-6, restitution=0.5
                              wall_restitution=restitution)
 
 
-def ball_on_block(block: Scene, settled, ratio=8.0, height=0.05, speed=1.0):
+def ball_on_block(block: Scene, settled, ratio=8.0, height=0.05, speed=1.0, offset=0.0,
+                  side=0.0):
     """A ball ``ratio`` x heavier than the spheres of ``block`` (an :func:`fcc_block`,
-    same radius) dropped onto it once settled: returns (scene, x, v) where the scene
-    holds the lattice block and the ball ``height`` [m] above its top sphere's centre,
-    and x, v (N + 1, 3) are ``settled`` (a State of the block) with the ball that
-    height above the settled top, moving down at ``speed`` [m/s], for
-    ``Simulation.set_state`` (settled spheres touch to round-off, which a scene
-    refuses)."""
+    same radius; the block's friction and other settings kept) dropped onto it once
+    settled: returns (scene, x, v) where the scene holds the lattice block and the
+    ball ``height`` [m] above its top sphere's centre, ``offset`` [m] off its axis
+    along x, and x, v (N + 1, 3) are ``settled`` (a State of the block) with the ball
+    that height above the settled top, moving down at ``speed`` and along x at
+    ``side`` [m/s], for ``Simulation.set_state`` (settled spheres touch to round-off,
+    which a scene refuses)."""
     top = settled.x[:, 2].max()
-    centre = [settled.x[:, 0].mean(), settled.x[:, 1].mean()]
+    centre = [settled.x[:, 0].mean() + offset, settled.x[:, 1].mean()]
     mass = np.append(settled.mass, ratio * settled.mass[0])
-    start = [[centre[0], centre[1], block.x[:, 2].max() + height]]
-    scene = Scene.from_arrays(np.vstack([block.x, start]), np.zeros((len(mass), 3)),
-                              np.full(len(mass), block.radius[0]), mass=mass,
-                              box=(block.box_lo, block.box_hi), gravity=block.gravity,
-                              restitution=block.restitution,
-                              wall_restitution=block.wall_restitution)
+    start = np.vstack([block.x, [[centre[0], centre[1], block.x[:, 2].max() + height]]])
+    scene = block.replace(x=start, v=np.zeros_like(start),
+                          radius=np.full(len(mass), block.radius[0]), mass=mass, omega=None,
+                          material=None)
     x = np.vstack([settled.x, [[centre[0], centre[1], top + height]]])
-    v = np.vstack([settled.v, [[0.0, 0.0, -speed]]])
+    v = np.vstack([settled.v, [[side, 0.0, -speed]]])
     return scene, x, v

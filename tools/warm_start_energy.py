@@ -27,7 +27,7 @@ sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, HERE)
 
 import taichi_spheres as ts  # noqa: E402
-from taichi_spheres.builders import fcc_block  # noqa: E402
+from taichi_spheres.builders import ball_on_block, fcc_block  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
 
@@ -49,15 +49,11 @@ def drop(block, settled, ratio: float, mode: str, steps: int) -> dict:
     """The ball dropped onto the settled block (module docstring) under
     bounded_warm_start ``mode``: largest one-step energy growth / impact energy, the
     step it happened, steps scaled."""
-    top = settled.x[:, 2].max()
-    centre = [settled.x[:, 0].mean() + OFF_AXIS, settled.x[:, 1].mean()]
-    mass = np.append(settled.mass, ratio * settled.mass[0])
-    start = np.vstack([block.x, [[centre[0], centre[1], block.x[:, 2].max() + HEIGHT]]])
-    scene = block.replace(x=start, v=np.zeros_like(start), radius=np.full(len(mass), R),
-                          mass=mass, omega=None, material=None)
+    scene, x, v = ball_on_block(block, settled, ratio, HEIGHT, DOWN, offset=OFF_AXIS,
+                                side=SIDE)
+    mass = scene.mass
     sim = ts.Simulation(scene, threads=1, tuning=Tuning().with_(bounded_warm_start=mode))
-    sim.set_state(np.vstack([settled.x, [[centre[0], centre[1], top + HEIGHT]]]),
-                  np.vstack([settled.v, [[SIDE, 0.0, -DOWN]]]))
+    sim.set_state(x, v)
     energy = [sim.energy_budget()["current"]]
     for _ in range(steps):
         sim.advance(sim.max_step())
