@@ -16,8 +16,8 @@
 #   sh tools/cuda_checks.sh [DIR]        # DIR defaults to out/cuda
 #   PARTS="bench beds" sh tools/cuda_checks.sh out/cuda
 # Environment: PARTS (default "bench beds silo suite"), PY (python, default python3),
-# WORKERS (pytest-xdist workers, default 12), BENCH_S, BEDS_S, SILO_S, SUITE_S (seconds
-# each part may take).
+# WORKERS (pytest-xdist workers, default 12), BED_SETTINGS (the beds' settings, default
+# "defaults relaxed fast"), BENCH_S, BEDS_S, SILO_S, SUITE_S (seconds each part may take).
 set -u
 mkdir -p "${1:-out/cuda}"
 dir=$(cd "${1:-out/cuda}" && pwd)
@@ -48,7 +48,7 @@ part() {
 part bench "${BENCH_S:-240}" bench.log "$py" tools/bench.py --arch cuda \
     --sizes 10000 100000 1000000 --seconds 1.5 --feature-n 0 --out "$dir/bench_cuda.md"
 part beds "${BEDS_S:-240}" beds.log "$py" tools/contact_solver.py --beds-only --arch cuda \
-    --bed-settings defaults relaxed fast --child-timeout 70 --write
+    --bed-settings ${BED_SETTINGS:-defaults relaxed fast} --child-timeout 70 --write
 part silo "${SILO_S:-120}" silo.log "$py" tools/silo_large.py --arch cuda --duration 0.05 \
     --write
 cp docs/bench.md "$dir/bench.md"
