@@ -23,7 +23,12 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (step_overlaps, ["--start", "2"], "--start < --duration"),
     (step_overlaps, ["--every", "0"], "--every >= 1"),
     (step_overlaps, ["--duration", "-1"], "--start < --duration"),
-    (silo_seeds, ["--seeds", "1"], "at least two seeds")])
+    (silo_seeds, ["--seeds", "1"], "at least two seeds"),
+    (silo_seeds, ["--jobs", "0"], "--jobs must be >= 1"),
+    (silo_seeds, ["--variants", "=--substeps"], "a variant is NAME=OPTIONS"),
+    (silo_seeds, ["--variants", "LAMMPS=--substeps"], "NAME not LAMMPS"),
+    (silo_seeds, ["--variants", "fine=--step-fractions 0.05"],
+     "variant 'fine': options tools/silo.py does not take")])
 def test_tools_refuse_bad_options(tool, argv, words, capsys):
     with pytest.raises(SystemExit) as exit_info:
         tool.main(argv)
@@ -61,8 +66,20 @@ def test_step_overlaps_table_names_the_command_and_both_settings():
 
 
 def test_silo_seeds_table_gives_each_rate_and_the_spread():
-    text = silo_seeds.report([1, 2], {"defaults": [0.16, 0.15], "substeps": [0.14, 0.15]})
+    text = silo_seeds.report([1, 2], {"defaults": [(0.16, 30.0), (0.15, 32.0)],
+                                      "substeps": [(0.14, 20.0), (0.15, 22.0)]})
     assert "`python tools/silo_seeds.py --seeds 1 2`" in text
-    assert "| defaults | 0.1600 | 0.1500 | 0.1550 | 0.0071 |" in text
-    assert "| substeps | 0.1400 | 0.1500 | 0.1450 | 0.0071 |" in text
+    assert "| defaults | 0.1600 | 0.1500 | 0.1550 | 0.0071 | 0.0050 | 31.0 |" in text
+    assert "| substeps | 0.1400 | 0.1500 | 0.1450 | 0.0071 | 0.0050 | 21.0 |" in text
 
+
+def test_silo_seeds_variants_and_lammps_are_named_in_the_command():
+    variants = [silo_seeds.parse_variant(v) for v in ["defaults=", "fine=--step-fraction 0.05"]]
+    assert variants == [("defaults", []), ("fine", ["--step-fraction", "0.05"])]
+    rows = {"defaults": [(0.16, 30.0), (0.15, 30.0)], "fine": [(0.15, 60.0), (0.15, 60.0)],
+            "LAMMPS": [(0.15, 66.0), (0.14, 66.0)]}
+    text = silo_seeds.report([1, 2], rows, variants, jobs=2)
+    assert '--variants "defaults=" "fine=--step-fraction 0.05" --lammps --jobs 2`' in text
+    assert "2 runs at a time" in text
+    assert "| fine | 0.1500 | 0.1500 | 0.1500 | 0.0000 | 0.0000 | 60.0 |" in text
+    assert "| LAMMPS | 0.1500 | 0.1400 |" in text
