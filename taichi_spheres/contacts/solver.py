@@ -54,6 +54,7 @@ from ..grid import Grid
 from ..params import StepParams
 from ..state import Features, SphereState
 from .friction_rows import FrictionRows
+from .overlaps import OverlapMeasure
 from .pgs import POSITION, VELOCITY, WARM, GaussSeidel
 from .rows import ContactRows
 from .shock import ShockPropagation, shock_compiled
@@ -66,7 +67,7 @@ __all__ = ["ContactSolver"]
 
 @ti.data_oriented
 class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
-                    WarmStartEnergy):
+                    WarmStartEnergy, OverlapMeasure):
     """Contact rows and their projected Gauss–Seidel solve (module docstring).
 
     Fields (K = contacts_per_sphere x capacity rows, M = cells, N = spheres):
@@ -226,8 +227,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
     @ti.func
     def finish(self):
         """x += h w; book the energy the solve removed (kinetic, and the potential energy
-        of its moves), the largest speed and overlap; keep the impulses for the next
-        step's warm start; with Rules.substeps, mark_near (kernel top level)."""
+        of its moves), the largest speed and the largest overlap (on the rows, then over
+        every pair, wall and object: overlaps.py); keep the impulses for the next step's
+        warm start; with Rules.substeps, mark_near (kernel top level)."""
         h = self.params.h[None]
         self.params.vmax2[None] = 0      # measured again: the solve changed velocities
         if ti.static(self.rules.substeps):
@@ -272,6 +274,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
                         self.warm_r[a, t] = self.lam_r[s]
         if ti.static(self.rules.substeps):
             self.mark_near()
+        self.measure_overlaps()
         self.h_prev[None] = h
         self.params.contacts[None] = self.n_rows[None]
 
