@@ -47,6 +47,9 @@ class ContactRows:
                 cj = self.grid.coords(self.grid.cell_of[j])
                 owner = self.grid.linear(self.grid.owner(ci, cj))
                 self.record(owner, ti.min(i, j), ti.max(i, j), fill)
+            else:               # its overlaps after the solve: overlaps.py
+                self.unrowed[i] = 1
+                self.unrowed[j] = 1
 
     @ti.func
     def consider_walls(self, i, xi, vi, ri, k, fill: ti.template()):
@@ -64,10 +67,16 @@ class ContactRows:
                 hi_imp = self.pairs.motion.wall_impact_speed(i, -g_a)
                 # with substeps impacts to come get rows too (inert_impact_row)
                 sub = ti.static(self.rules.substeps)
-                if lo_gap < self.margin[None] and (sub or lo_gap < 0 or -vi[a] <= lo_imp):
-                    self.record(k, i, -1 - 2 * a, fill)
-                if hi_gap < self.margin[None] and (sub or hi_gap < 0 or vi[a] <= hi_imp):
-                    self.record(k, i, -2 - 2 * a, fill)
+                if lo_gap < self.margin[None]:
+                    if sub or lo_gap < 0 or -vi[a] <= lo_imp:
+                        self.record(k, i, -1 - 2 * a, fill)
+                    else:       # its overlap after the solve: overlaps.py
+                        self.unrowed[i] = 1
+                if hi_gap < self.margin[None]:
+                    if sub or hi_gap < 0 or vi[a] <= hi_imp:
+                        self.record(k, i, -2 - 2 * a, fill)
+                    else:
+                        self.unrowed[i] = 1
 
     @ti.func
     def consider_geometry(self, i, xi, vi, ri, k, fill: ti.template()):
@@ -83,6 +92,8 @@ class ContactRows:
                 if ti.static(self.rules.substeps) or gap < 0 or \
                         -vi.dot(n) <= motion.wall_impact_speed(i, acc):
                     self.record(k, i, -1 - GEOMETRY_ROWS - g, fill)
+                else:           # its overlap after the solve: overlaps.py
+                    self.unrowed[i] = 1
 
     @ti.func
     def gather_sphere(self, p, fill: ti.template()):

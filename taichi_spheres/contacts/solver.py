@@ -47,10 +47,11 @@ of ``Rules.overlap_tolerance`` of the smallest diameter), at most
 A mixin-free class over the engine's state, grid, parameters and pair geometry.
 """
 
+import numpy as np
 import taichi as ti
 
 from ..config import DEFAULT, Tuning
-from ..grid import Grid
+from ..grid import ALL_ROWS, Grid
 from ..params import StepParams
 from ..state import Features, SphereState
 from .friction_rows import FrictionRows
@@ -85,6 +86,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             impulse on a [N m s]
         cell_count, cell_fill: (M,) i32, cell_start: (M+1,) i32 — rows per owner cell
         v_pre, w: (N,) vec3 — velocities before the solve, pseudo-velocities [m/s]
+        unrowed: (N,) i32 — 1 for a sphere with an impact to come and no row for it
+            this step (rows.py; overlaps.py measures its pairs and walls, then clears
+            it); all_rows: grid.ALL_ROWS, the full stencil
         w_pre: (N,) vec3, only with friction — spins before the solve [rad/s]
         x_pre: (N,) vec3 — positions before the solve [m]
         warm_key, warm_lam: (N, warm_slots) — last step's rows keyed at their sphere
@@ -146,6 +150,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.v_pre = ti.Vector.field(3, real, shape=cap)
         self.x_pre = ti.Vector.field(3, real, shape=cap)
         self.w = ti.Vector.field(3, real, shape=cap)
+        self.unrowed = ti.field(ti.i32, shape=cap)
+        self.all_rows = ti.Vector.field(4, ti.i32, shape=len(ALL_ROWS))
+        self.all_rows.from_numpy(np.array(ALL_ROWS, dtype=np.int32))
         self.warm_key = ti.field(ti.i32, shape=(cap, slots))
         self.warm_lam = ti.field(real, shape=(cap, slots))
         self.warm_n = ti.field(ti.i32, shape=cap)
