@@ -2,15 +2,16 @@
 """Overlaps after a step, measured brute force, against what stats["max_overlap"]
 reports, without and with substeps (Rules.substeps).
 
-stats["max_overlap"] is measured on the contact solver's rows (and on what the impact
-sweeps leave). A sphere the solve stops is moved by its position update (the
-trapezoidal move); a neighbour about to hit it (an impact to come, apart and
-approaching faster than the impact speed) has no row, so an overlap that move makes
-with it is neither removed in that step nor reported. With substeps such pairs get
-rows for the position pass (docs/algorithm.md, "Substeps"). This tool runs a scene
-to --duration on 1 thread with the defaults and with substeps, and after every
---every-th step measures the largest pair or wall overlap / diameter over all pairs
-(tools/contact_solver.py ``max_overlap``).
+stats["max_overlap"] is the largest overlap after a step: the contact solver measures
+it on its rows and, for the spheres of impacts to come (apart and approaching faster
+than the impact speed: no row), over their full stencil, walls and objects
+(contacts/overlaps.py). Such overlaps arise where a sphere the solve stops is moved by
+its position update (the trapezoidal move) into a neighbour or wall about to hit it;
+with substeps those pairs get rows for the position pass (docs/algorithm.md,
+"Substeps"). This tool checks the measurement: it runs a scene to --duration on 1
+thread with the defaults and with substeps, and after every --every-th step measures
+the largest pair or wall overlap / diameter over all pairs brute force
+(tools/contact_solver.py ``max_overlap``), against what the steps reported.
 
     python tools/step_overlaps.py --write            # ~1 min on 1 core
 """
