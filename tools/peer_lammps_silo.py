@@ -86,7 +86,7 @@ def main(argv=None):
     x = silo.fill_positions(a.silo_radius, a.radius, a.fill, 0.05, np.array([c, c]), 1)
     rows = {}
     t_times, t_mass, t_wall, t_count, n, t_overlap = taichi_run(a, x)
-    total = n * 2500.0 * 4 / 3 * math.pi * a.radius ** 3
+    total = silo.total_mass(a, n)
     rows["taichi_spheres"] = (silo.steady_rate(t_times, t_mass, total, a.transient)[0], t_count,
                               t_wall / (t_times[-1] - t_times[0]))
     l_times, l_mass, l_wall, l_count, version = lammps_run(a, x)

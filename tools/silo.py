@@ -138,6 +138,11 @@ def discharge(a, settled, hole):
     return np.array(times), np.array(mass), time.perf_counter() - t0, sim
 
 
+def total_mass(a, n: int) -> float:
+    """Mass [kg] of n spheres of radius a.radius (2500 kg/m^3, silo_scene's density)."""
+    return float(n * 2500.0 * 4 / 3 * math.pi * a.radius ** 3)
+
+
 def steady_rate(times, mass, total, transient) -> tuple:
     """(W [kg/s], samples): least-squares slope of mass(t) after ``transient`` s while
     less than half of ``total`` [kg] has left; (nan, n) with fewer than 4 samples."""
@@ -202,7 +207,7 @@ def run(a) -> dict:
                settled_height=settled[6])
     for ratio in a.orifices:
         times, mass, seconds, sim = discharge(a, settled, ratio * d / 2)
-        total = float(settled[0].shape[0] * 2500.0 * 4 / 3 * math.pi * a.radius ** 3)
+        total = total_mass(a, settled[0].shape[0])
         w, used = steady_rate(times, mass, total, a.transient)
         out["orifices"].append(dict(D_over_d=ratio, rate=w, samples=used,
                                     wall_per_sim=seconds / (times[-1] - times[0]),
@@ -215,7 +220,7 @@ def run(a) -> dict:
     for height in a.fills:
         other = settled_fill(a, height, seed=2)
         times, mass, seconds, sim = discharge(a, other, a.orifices[0] * d / 2)
-        total = float(other[0].shape[0] * 2500.0 * 4 / 3 * math.pi * a.radius ** 3)
+        total = total_mass(a, other[0].shape[0])
         w, used = steady_rate(times, mass, total, a.transient)
         out["fills"].append(dict(fill=height, n=len(other[0]), rate=w, samples=used,
                                  settled_height=other[6]))

@@ -44,16 +44,11 @@ VARIANTS = ["defaults=", "substeps=--substeps"]
 LAMMPS = "LAMMPS"
 
 
-def total_mass(a, n: int) -> float:
-    """Mass [kg] of n spheres of the silo's radius (2500 kg/m^3)."""
-    return n * 2500.0 * 4 / 3 * math.pi * a.radius ** 3
-
-
 def rate(a, settled) -> tuple:
     """(steady discharge rate [kg/s], wall s per simulated s) of the settled fill's
     discharge under options ``a``."""
     times, mass, wall, _ = silo.discharge(a, settled, a.orifice * a.radius)
-    w = silo.steady_rate(times, mass, total_mass(a, len(settled[0])), a.transient)[0]
+    w = silo.steady_rate(times, mass, silo.total_mass(a, len(settled[0])), a.transient)[0]
     return w, wall / (times[-1] - times[0])
 
 
@@ -62,7 +57,7 @@ def lammps_rate(a, seed: int) -> tuple:
     c = a.silo_radius + 0.005
     x = silo.fill_positions(a.silo_radius, a.radius, a.fill, 0.05, np.array([c, c]), seed)
     times, mass, wall, _, _ = peer_lammps_silo.lammps_run(a, x)
-    return silo.steady_rate(times, mass, total_mass(a, len(x)), a.transient)[0], wall / a.duration
+    return silo.steady_rate(times, mass, silo.total_mass(a, len(x)), a.transient)[0], wall / a.duration
 
 
 def parse_variant(text: str) -> tuple:
