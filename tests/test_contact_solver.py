@@ -238,14 +238,20 @@ def test_shock_propagation_same_bits_serial_and_parallel(arch):
     assert out[0] == out[1]
 
 
-@pytest.mark.parametrize("shock", ["off", "on"])
-def test_removing_the_support_under_a_warm_started_column(arch, shock):
+@pytest.mark.parametrize("shock, substeps", [
+    ("off", False), ("on", False), ("off", True),
+    pytest.param("on", True, marks=pytest.mark.xfail(strict=True, reason=(
+        "known limitation (docs/algorithm.md, Substeps): the short last step of advance "
+        "after long ones leaves the column moving at ~1e-3 m/s")))])
+def test_removing_the_support_under_a_warm_started_column(arch, shock, substeps):
     """A settled column of 10 whose bottom sphere is taken away (moved aside on the
     floor): the warm-started impulses between the others hold nothing up (they fall
     freely until they land), and the column settles again at rest without overlap,
-    its energy never above that of the moment the support went (Box2D's Solver2D)."""
+    its energy never above that of the moment the support went (Box2D's Solver2D).
+    Also in substeps (Rules.substeps)."""
     scene = _column(10)
-    sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(shock_propagation=shock))
+    sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(shock_propagation=shock,
+                                                                substeps=substeps))
     sim.advance(1.0)
     st = sim.state()
     x = st.x.copy()
