@@ -101,6 +101,18 @@ def assert_same_counters(a: dict, b: dict, sim, parallel_sums: bool | None = Non
             assert b[key] == pytest.approx(value, rel=tol_for(sim, 1e-12, 1e2)), key
 
 
+def brute_overlap(st, scene):
+    """Largest pair or box-wall overlap / contact distance of state ``st`` in
+    ``scene``'s box (brute force over all pairs)."""
+    d = np.linalg.norm(st.x[:, None] - st.x[None], axis=-1)
+    s = st.radius[:, None] + st.radius[None]
+    np.fill_diagonal(d, np.inf)
+    worst = max(0.0, float(np.max((s - d) / s)))
+    lo = st.x - st.radius[:, None] - scene.box_lo
+    hi = scene.box_hi - st.x - st.radius[:, None]
+    return max(worst, float(-min(lo.min(), hi.min()) / (2 * st.radius.min())))
+
+
 def walled_gravity_gas():
     """30 spheres of unequal masses (0.5-2 kg, radius 0.05 m) moving at 3 m/s in a
     walled box under gravity (e = 0.7, wall e = 0.8), none resting in the first 0.5 s:

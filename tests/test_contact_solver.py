@@ -11,6 +11,7 @@ import taichi_spheres as ts
 from taichi_spheres import observe
 from taichi_spheres.builders import ball_on_block, fcc_block
 from taichi_spheres.config import Tuning
+from conftest import brute_overlap
 
 G = 9.81
 R = 0.01
@@ -24,17 +25,6 @@ def _column(n, mass=None, gap=1e-4, e=0.5):
     return ts.Scene.from_arrays(x, np.zeros((n, 3)), np.full(n, R), mass=mass,
                                 box=((0, 0, 0), (0.1, 0.1, (2 * R + gap) * n + 0.1)),
                                 gravity=(0, 0, -G), restitution=e, wall_restitution=e)
-
-
-def _overlap(st, scene):
-    """Largest pair or wall overlap / diameter (brute force)."""
-    d = np.linalg.norm(st.x[:, None] - st.x[None], axis=-1)
-    s = st.radius[:, None] + st.radius[None]
-    np.fill_diagonal(d, np.inf)
-    worst = max(0.0, float(np.max((s - d) / s)))
-    lo = st.x - st.radius[:, None] - scene.box_lo
-    hi = scene.box_hi - st.x - st.radius[:, None]
-    return max(worst, float(-min(lo.min(), hi.min()) / (2 * st.radius.min())))
 
 
 def _energies_by_step(sim, steps):
@@ -55,7 +45,7 @@ def test_column_settles_without_overlap_or_drift(arch, precision, n):
     sim = ts.Simulation(_column(n), arch=arch, precision=precision)
     sim.advance(2.0)
     st = sim.state()
-    assert _overlap(st, sim.scene) <= 1e-4
+    assert brute_overlap(st, sim.scene) <= 1e-4
     assert np.abs(st.v).max() <= _speed_floor(precision)
     z = st.x[:, 2].copy()
     sim.advance(10.0)                          # no drift over 10 s
@@ -73,14 +63,14 @@ def test_fcc_block_settles_and_holds(arch):
     sim = ts.Simulation(scene, arch=arch)
     sim.advance(1.0)
     st = sim.state()
-    assert _overlap(st, scene) <= 1e-4
+    assert brute_overlap(st, scene) <= 1e-4
     assert np.abs(st.v).max() <= 1e-4
     x = st.x.copy()
     sim.advance(2.0)
     st = sim.state()
     assert np.abs(st.x - x).max() <= 1e-4 * 2 * R
     assert np.abs(st.v).max() <= 1e-6
-    assert _overlap(st, scene) <= 1e-4
+    assert brute_overlap(st, scene) <= 1e-4
     assert sim.last_step["contact_iterations"] <= 5
     assert sim.stats["sweep_limit_hits"] == 0
 
@@ -132,7 +122,7 @@ def test_heavy_on_light_column_holds(arch, precision):
     assert e.max() <= e[0] * (1 + 1e-12)
     sim.advance(2.0)
     st = sim.state()
-    assert _overlap(st, scene) <= 1e-4
+    assert brute_overlap(st, scene) <= 1e-4
     assert np.abs(st.v).max() <= _speed_floor(precision)
     z = st.x[:, 2].copy()
     sim.advance(10.0)
@@ -140,7 +130,7 @@ def test_heavy_on_light_column_holds(arch, precision):
     # f32 keeps ~7 digits of the top sphere's 0.4 m: its column settles ~3e-6 m in 10 s
     drift = 1e-4 if precision == "f64" else 1e-3
     assert np.abs(st.x[:, 2] - z).max() <= drift * 2 * R
-    assert _overlap(st, scene) <= 1e-4
+    assert brute_overlap(st, scene) <= 1e-4
 
 
 def test_over_relaxed_sweeps_hold_the_heavy_on_light_column(arch, precision):
@@ -159,7 +149,7 @@ def test_over_relaxed_sweeps_hold_the_heavy_on_light_column(arch, precision):
         sim.advance(2.0)
         st = sim.state()
         finite = bool(np.isfinite(st.x).all() and np.isfinite(st.v).all())
-        worst[plain] = _overlap(st, scene) if finite else np.inf
+        worst[plain] = brute_overlap(st, scene) if finite else np.inf
         if plain:
             assert finite
             assert e.max() <= e[0] * (1 + 1e-12)
@@ -267,7 +257,7 @@ def test_removing_the_support_under_a_warm_started_column(arch, shock, substeps)
     assert e.max() <= e0 * (1 + 1e-12)
     sim.advance(2.0)
     st = sim.state()
-    assert _overlap(st, scene) <= 1e-4
+    assert brute_overlap(st, scene) <= 1e-4
     assert np.abs(st.v).max() <= 1e-6
     assert st.x[1:, 2].min() == pytest.approx(R, rel=1e-3)
 
@@ -291,7 +281,7 @@ def test_overlap_recovery_moves_positions_not_velocities(arch, shock):
     assert upward <= 2e-3          # ~1 mm/s: 300x below a push-out in one step
     sim.advance(1.0)
     st = sim.state()
-    assert _overlap(st, scene) <= 1e-4
+    assert brute_overlap(st, scene) <= 1e-4
     assert np.abs(st.v).max() <= 1e-6
 
 
@@ -403,7 +393,7 @@ def test_heavy_ball_dropped_onto_a_settled_bed(arch, shock):
     sim.advance(1.0)
     st = sim.state()
     layers = np.unique(np.round(st.x[:, 2] / R, 1)).size
-    lift = st.mass.sum() * G * layers * _overlap(st, scene) * 2 * R     # [J]
+    lift = st.mass.sum() * G * layers * brute_overlap(st, scene) * 2 * R     # [J]
     bed, x, v = ball_on_block(scene, st, ratio=8.0, height=0.05, speed=1.0)
     sim = ts.Simulation(bed, arch=arch, tuning=Tuning().with_(shock_propagation=shock))
     sim.set_state(x, v)
@@ -412,7 +402,7 @@ def test_heavy_ball_dropped_onto_a_settled_bed(arch, shock):
     assert e.max() <= e[0] * (1 + 1e-12) + lift
     sim.advance(2.0)
     st = sim.state()
-    assert _overlap(st, bed) <= 1e-4
+    assert brute_overlap(st, bed) <= 1e-4
     assert st.x[:, 2].min() >= R * (1 - 1e-4)
     assert np.abs(st.v).max() <= 1e-3
     assert sim.stats["pair_collisions"] > 0 and sim.stats["contacts"] > 0
@@ -531,7 +521,7 @@ def test_max_overlap_counts_pairs_and_walls_without_rows(arch, precision, subste
     worst, under = 0.0, 0.0
     while sim.time < 0.45:
         sim.step_toward(0.45)
-        brute = _overlap(sim.state(), scene)
+        brute = brute_overlap(sim.state(), scene)
         worst = max(worst, brute)
         under = max(under, brute - sim.last_step["max_overlap"])
     assert worst < 1e-3 if substeps else worst > 1e-3

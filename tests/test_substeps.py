@@ -12,7 +12,7 @@ import pytest
 
 import taichi_spheres as ts
 from taichi_spheres import observe
-from conftest import walled_gravity_gas
+from conftest import brute_overlap, walled_gravity_gas
 from taichi_spheres.builders import fcc_block
 from taichi_spheres.config import Tuning
 from taichi_spheres.reference import EventDrivenReference
@@ -33,14 +33,6 @@ def _column_and_ball(height=0.5, n=10):
     return Scene.from_arrays(x, np.zeros_like(x), np.full(n + 1, R),
                              box=((0, 0, 0), (0.1, 0.1, x[n, 2] + 0.1)), gravity=(0, 0, -G),
                              restitution=0.5, wall_restitution=0.5)
-
-
-def _largest_overlap(st):
-    """Largest pair overlap / diameter (brute force; the floor: below 0)."""
-    d = np.linalg.norm(st.x[:, None] - st.x[None], axis=-1)
-    np.fill_diagonal(d, np.inf)
-    pairs = float(np.max(2 * R - d)) / (2 * R)
-    return max(0.0, pairs, float(R - st.x[:, 2].min()) / (2 * R))
 
 
 def test_substeps_take_true_or_false():
@@ -91,7 +83,7 @@ def test_ball_onto_a_column_in_substeps(arch, precision):
     sim.advance_to(2.0)
     assert sim.time == 2.0
     st = sim.state()
-    assert _largest_overlap(st) <= 1e-4
+    assert brute_overlap(st, sim.scene) <= 1e-4
     assert np.abs(st.v).max() <= (1e-6 if precision == "f64" else 1e-3)
 
 
@@ -104,7 +96,7 @@ def test_fcc_block_holds_in_substeps(arch):
     st = sim.state()
     assert np.abs(st.x - x).max() <= 1e-4 * 2 * R
     assert np.abs(st.v).max() <= 1e-6
-    assert _largest_overlap(st) <= 1e-4
+    assert brute_overlap(st, sim.scene) <= 1e-4
     assert sim.stats["sweep_limit_hits"] == 0
 
 

@@ -9,7 +9,9 @@ Gathering the rows flags the spheres of such impacts to come (``unrowed``, rows.
 after the solve this pass measures every pair (the full stencil) and every wall and
 object of a flagged sphere at the positions the step ends with, and clears the flag.
 It only measures: positions and velocities are not touched, so it changes no
-trajectory. In a bed nothing is flagged and the pass reads one flag per sphere.
+trajectory. In a bed nothing is flagged and the pass reads one flag per sphere. With
+Rules.substeps it does not run: every impact to come has a position-only row there
+(rows.py ``inert_impact_row``), measured on the rows.
 
 A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 """

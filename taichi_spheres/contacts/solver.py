@@ -281,7 +281,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
                         self.warm_r[a, t] = self.lam_r[s]
         if ti.static(self.rules.substeps):
             self.mark_near()
-        self.measure_overlaps()
+        else:       # (with substeps every impact to come has a row: none is flagged)
+            self.measure_overlaps()
         self.h_prev[None] = h
         self.params.contacts[None] = self.n_rows[None]
 
