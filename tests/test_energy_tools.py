@@ -12,6 +12,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import bed_energy  # noqa: E402  (tools/bed_energy.py)
 import silo_seeds  # noqa: E402  (tools/silo_seeds.py)
+import settings_tradeoff  # noqa: E402  (tools/settings_tradeoff.py)
 import step_overlaps  # noqa: E402  (tools/step_overlaps.py)
 import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
 
@@ -23,6 +24,8 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (step_overlaps, ["--start", "2"], "--start < --duration"),
     (step_overlaps, ["--every", "0"], "--every >= 1"),
     (step_overlaps, ["--duration", "-1"], "--start < --duration"),
+    (step_overlaps, ["--variants", "fast=relax=1.8"], "unknown tuning field 'relax'"),
+    (settings_tradeoff, ["--variants", "=relaxation=1.8"], "a variant is NAME=FIELD=VALUE"),
     (silo_seeds, ["--seeds", "1"], "at least two seeds"),
     (silo_seeds, ["--jobs", "0"], "--jobs must be >= 1"),
     (silo_seeds, ["--variants", "=--substeps"], "a variant is NAME=OPTIONS"),
@@ -56,13 +59,34 @@ def test_bed_energy_table_quotes_lammps_from_its_stored_run():
 
 def test_step_overlaps_table_names_the_command_and_both_settings():
     args = argparse.Namespace(scene="scenes/pour.toml", start=1.0, duration=2.0, every=1,
-                              write=True, section="step-overlaps-bed")
-    row = dict(brute=6.6e-4, when=1.138, reported=6.6e-4, steps=2008, substeps=2008)
+                              write=True, section="step-overlaps-bed",
+                              variants=step_overlaps.VARIANTS)
+    row = dict(brute=6.6e-4, when=1.138, reported=6.6e-4, steps=2008, substeps=2008,
+               wall=1.25, velocity=100.0, position=97.5, hits=0, kinetic=4.7e-6)
     text = step_overlaps.report(args, {"defaults": row, "substeps": dict(row, substeps=3000)})
     assert "`python tools/step_overlaps.py --start 1 --every 1 --section step-overlaps-bed " \
         "--write`" in text
-    assert "| defaults | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 2008 |" in text
+    assert "| defaults | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 2008 | 1.25 | 100.0 / 97.5 | 0 " \
+        "| 4.70e-06 |" in text
     assert "| substeps | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 3000 |" in text
+    assert "- substeps: `Tuning().with_(substeps=True)`" in text
+
+
+def test_step_overlaps_and_settings_tradeoff_name_their_variants():
+    """A variant's settings are Tuning fields; the command line names non-default ones."""
+    assert step_overlaps.parse_variant("fast=relaxation=1.8 shock_propagation=on") == \
+        ("fast", {"relaxation": 1.8, "shock_propagation": "on"})
+    with pytest.raises(ValueError, match="unknown tuning field 'relax'"):
+        step_overlaps.parse_variant("fast=relax=1.8")
+    with pytest.raises(ValueError, match="not FIELD=VALUE"):
+        step_overlaps.parse_variant("fast=relaxation")
+    args = argparse.Namespace(variants=["a=relaxation=1.5"], every=1, write=False)
+    row = dict(wall=0.9, brute=5e-5, velocity=60.0, position=58.0, kinetic=2e-6, ball=1e-3,
+               ball_step=1)
+    text = settings_tradeoff.report(args, {"a": row})
+    assert '`python tools/settings_tradeoff.py --variants "a=relaxation=1.5"`' in text
+    assert "| a | 0.9 | 5.00e-05 | 60 / 58 | 2.0e-06 | 1.0e-03 (1) |" in text
+    assert "- a: `Tuning().with_(relaxation=1.5)`" in text
 
 
 def test_silo_seeds_table_gives_each_rate_and_the_spread():

@@ -97,9 +97,9 @@ def main(argv=None):
              + (f" (taichi_spheres: step_fraction {a.step_fraction:g}, velocity / position "
                 f"sweeps at most {a.sweeps or Rules().contact_iterations} / "
                 f"{a.position_sweeps or Rules().position_iterations}"
-                f"{f', relaxation {a.relaxation:g}' if a.relaxation is not None else ''}"
+                f", relaxation {a.relaxation if a.relaxation is not None else Rules().relaxation:g}"
                 f"{', shock propagation' if a.shock else ''}"
-                f"{', substeps' if a.substeps else ''})"),
+                f"{', substeps' if silo.engine_options(a)['tuning'].physics.substeps else ', no substeps'})"),
              "", f"{n} spheres of d = {2e3 * a.radius:g} mm (2500 kg/m^3, e = 0.5, mu = "
                  f"{a.mu}), silo radius {1e3 * a.silo_radius:g} mm, orifice D = "
                  f"{own.orifice:g} d, settled {a.settle} s, discharge {a.duration} s, rate "

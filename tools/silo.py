@@ -90,8 +90,8 @@ def engine_options(a) -> dict:
         tuning = tuning.with_(position_iterations=a.position_sweeps)
     if a.shock:
         tuning = tuning.with_(shock_propagation="on")
-    if a.substeps:
-        tuning = tuning.with_(substeps=True)
+    if a.substeps is not None:
+        tuning = tuning.with_(substeps=a.substeps)
     return dict(threads=a.threads, step_fraction=a.step_fraction, tuning=tuning)
 
 
@@ -187,9 +187,10 @@ def parse(argv=None):
                    help="the contact solver's over-relaxation (default: Rules')")
     p.add_argument("--shock", action="store_true",
                    help="switch on the contact solver's shock propagation pass")
-    p.add_argument("--substeps", action="store_true",
+    p.add_argument("--substeps", action=argparse.BooleanOptionalAction, default=None,
                    help="drift and impacts in substeps, the contact solver once per step "
-                        "(Rules.substeps)")
+                        "(Rules.substeps; default: Rules', off); --no-substeps: one drift "
+                        "per solve")
     p.add_argument("--write", action="store_true", help="write docs/granular.md's section")
     p.add_argument("--no-write", dest="write", action="store_false")
     p.add_argument("--json", help="also write the results to this JSON file")

@@ -36,23 +36,25 @@ R = 0.01
 HEIGHT, DOWN, SIDE, OFF_AXIS = 0.05, 1.0, 0.3, 0.003
 
 
-def settled_block(mu: float):
-    """The 256-sphere block with friction mu, and its state after 1 s (defaults)."""
+def settled_block(mu: float, tuning=None):
+    """The 256-sphere block with friction mu, and its state after 1 s (``tuning``:
+    default Tuning())."""
     block = fcc_block((4, 4, 4), radius=R, restitution=0.5).replace(
         friction=mu, wall_friction=mu)
-    sim = ts.Simulation(block, threads=1)
+    sim = ts.Simulation(block, threads=1, tuning=tuning or Tuning())
     sim.advance(1.0)
     return block, sim.state()
 
 
-def drop(block, settled, ratio: float, mode: str, steps: int) -> dict:
+def drop(block, settled, ratio: float, mode: str, steps: int, tuning=None) -> dict:
     """The ball dropped onto the settled block (module docstring) under
-    bounded_warm_start ``mode``: largest one-step energy growth / impact energy, the
-    step it happened, steps scaled."""
+    bounded_warm_start ``mode`` (other settings: ``tuning``, default Tuning()): largest
+    one-step energy growth / impact energy, the step it happened, steps scaled."""
     scene, x, v = ball_on_block(block, settled, ratio, HEIGHT, DOWN, offset=OFF_AXIS,
                                 side=SIDE)
     mass = scene.mass
-    sim = ts.Simulation(scene, threads=1, tuning=Tuning().with_(bounded_warm_start=mode))
+    sim = ts.Simulation(scene, threads=1,
+                        tuning=(tuning or Tuning()).with_(bounded_warm_start=mode))
     sim.set_state(x, v)
     energy = [sim.energy_budget()["current"]]
     for _ in range(steps):
