@@ -252,7 +252,14 @@ class ContactRows:
         impulse), so only the position pass sees them: where the solve's position
         update (the trapezoidal move) pushes a sphere it stopped into such a
         neighbour or wall, which the longer steps of substeps make deep enough to
-        matter."""
+        matter. An approach that closes at most the position tolerance in the step
+        (delta / h, a tenth of Rules.overlap_tolerance of the smallest diameter per
+        step) is no impact to come, whatever the pair's impact speed: two spheres
+        resting on each other without load flags (a new Simulation's first step)
+        approach by round-off, and with an inert row the lower one was stopped while
+        the upper one kept falling, its overlap pushed out by the position pass but
+        its speed kept: energy from nothing (a settled block, ~(g h)^2 / 2 per
+        sphere)."""
         a = self.row_a[s]
         b = self.row_b[s]
         if gap > 0:
@@ -266,7 +273,7 @@ class ContactRows:
                 if ti.static(self.f.gravity):
                     acc = self.params.gravity[None].dot(n)
                 impact = self.pairs.motion.wall_impact_speed(a, acc)
-            if un < -impact:
+            if un < -ti.max(impact, self.tol_len[None] / self.params.h[None]):
                 self.target[s] = -ti.cast(1e30, self.real)
                 self.lam[s] = 0
                 if ti.static(self.f.friction):
