@@ -13,6 +13,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 import bed_energy  # noqa: E402  (tools/bed_energy.py)
 import silo_seeds  # noqa: E402  (tools/silo_seeds.py)
 import settings_tradeoff  # noqa: E402  (tools/settings_tradeoff.py)
+import silo_overlaps  # noqa: E402  (tools/silo_overlaps.py)
 import step_overlaps  # noqa: E402  (tools/step_overlaps.py)
 import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
 
@@ -26,6 +27,8 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (step_overlaps, ["--duration", "-1"], "--start < --duration"),
     (step_overlaps, ["--variants", "fast=relax=1.8"], "unknown tuning field 'relax'"),
     (settings_tradeoff, ["--variants", "=relaxation=1.8"], "a variant is NAME=FIELD=VALUE"),
+    (silo_overlaps, ["--first", "0"], "--first must be >= 1"),
+    (silo_overlaps, ["--variants", "=--substeps"], "a variant is NAME=OPTIONS"),
     (silo_seeds, ["--seeds", "1"], "at least two seeds"),
     (silo_seeds, ["--jobs", "0"], "--jobs must be >= 1"),
     (silo_seeds, ["--variants", "=--substeps"], "a variant is NAME=OPTIONS"),
@@ -87,6 +90,14 @@ def test_step_overlaps_and_settings_tradeoff_name_their_variants():
     assert '`python tools/settings_tradeoff.py --variants "a=relaxation=1.5"`' in text
     assert "| a | 0.9 | 5.00e-05 | 60 / 58 | 2.0e-06 | 1.0e-03 (1) |" in text
     assert "- a: `Tuning().with_(relaxation=1.5)`" in text
+
+
+def test_silo_overlaps_table_gives_the_first_steps_and_the_rest():
+    rows = {"substeps": dict(early=[2.8e-3, 2.4e-4], late=2.3e-5, when=0.541, steps=800)}
+    text = silo_overlaps.report([("substeps", ["--substeps"])], rows, 2,
+                                "python tools/silo_overlaps.py --first 2")
+    assert "`python tools/silo_overlaps.py --first 2`" in text
+    assert "| substeps | 2.8e-03, 2.4e-04 | 2.3e-05 (0.541) | 800 |" in text
 
 
 def test_silo_seeds_table_gives_each_rate_and_the_spread():
