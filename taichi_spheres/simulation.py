@@ -102,6 +102,8 @@ def field_bytes_for(spheres: int, cells: int, features: Features, near_lists: bo
         # solver rows (a, b; normal, gap, targets, meff, lam, mu), v_pre, x_pre, w, warm
         per_sphere += perf.contacts_per_sphere * (2 * 4 + 9 * real) + 9 * real \
             + perf.warm_slots * (4 + real) + 4
+        if features.gravity:
+            per_sphere += real      # drop (ContactSolver.close_support_gaps)
         per_cell += 3 * 4   # cell_count, cell_fill, cell_start
     return spheres * per_sphere + cells * per_cell
 

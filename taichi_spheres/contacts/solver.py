@@ -26,7 +26,9 @@ between the surfaces (< 0: overlap):
   more than the solve took from its kinetic energy (a speculative row slowing an
   approach from above), it is shortened to the break-even length, so the move adds
   no sphere more energy than its own velocity change took (the sum can still rise:
-  the solve passes momentum between spheres);
+  the solve passes momentum between spheres). A sphere a support (wall or object)
+  held that the move put back above it, at a start gap the drift had closed, is
+  lowered onto it (close_support_gaps): otherwise it rested there, above the floor;
 - split impulse (Catto; Bullet): overlap left after that is removed by
   pseudo-velocities ``w`` solved the same way (``w_n >= -gap/h``, no warm start),
   which move positions (``x += h w``) and never change velocities. Pair
@@ -91,6 +93,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             it); all_rows: grid.ALL_ROWS, the full stencil
         w_pre: (N,) vec3, only with friction — spins before the solve [rad/s]
         x_pre: (N,) vec3 — positions before the solve [m]
+        drop: (N,) real, only with gravity — how far close_support_gaps lowers a
+            sphere [m]
         warm_key, warm_lam: (N, warm_slots) — last step's rows keyed at their sphere
             a: b and lambda; warm_n: (N,) i32 rows kept (more than warm_slots: none);
             warm_t, warm_r: (N, warm_slots) vec3 — lam_t and lam_r of those rows
@@ -151,6 +155,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.x_pre = ti.Vector.field(3, real, shape=cap)
         self.w = ti.Vector.field(3, real, shape=cap)
         self.unrowed = ti.field(ti.i32, shape=cap)
+        self.drop = ti.field(real, shape=cap) if self.f.gravity else None
         self.all_rows = ti.Vector.field(4, ti.i32, shape=len(ALL_ROWS))
         self.all_rows.from_numpy(np.array(ALL_ROWS, dtype=np.int32))
         self.warm_key = ti.field(ti.i32, shape=(cap, slots))
@@ -223,6 +228,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.state.n_spheres[None]):
             self.trapezoidal_move(i, h)
+        if ti.static(self.f.gravity):
+            self.close_support_gaps()
         ti.loop_config(serialize=ti.static(self.serial))
         for s in range(ti.min(self.n_rows[None], ti.static(self.capacity))):
             n, gap, meff = self.row_geometry(s)
@@ -230,6 +237,36 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             self.gap[s] = gap
             self.pos_target[s] = -gap / h
             self.mu[s] = 0
+
+    @ti.func
+    def close_support_gaps(self):
+        """After the trapezoidal move: a sphere a supporting wall or object row held
+        (lambda > 0, normal at least 60 degrees from horizontal, upwards) that the
+        move lifted to a gap above delta is lowered back, vertically, by the smaller
+        of what closes that gap to delta and what the move lifted it (the largest over
+        its support rows: order-free). The rows see the drifted positions, where a
+        resting sphere overlaps its support by g h^2/2, so the move put such a sphere
+        back at any start gap below that: it rested above the floor (docs/algorithm.md,
+        "Substeps"). Lowering only lowers potential energy and changes no velocity."""
+        up = -self.params.gravity[None].normalized()
+        ti.loop_config(serialize=ti.static(self.serial))
+        for i in range(self.state.n_spheres[None]):
+            self.drop[i] = 0
+        ti.loop_config(serialize=ti.static(self.serial))
+        for s in range(ti.min(self.n_rows[None], ti.static(self.capacity))):
+            if self.row_b[s] < 0 and self.lam[s] > 0:
+                n, gap, meff = self.row_geometry(s)
+                slope = n.dot(up)
+                if slope >= 0.5 and gap > self.tol_len[None]:
+                    a = self.row_a[s]
+                    lifted = (self.state.x[a] - self.x_pre[a]).dot(up)
+                    d = ti.min((gap - self.tol_len[None]) / slope, lifted)
+                    if d > 0:
+                        ti.atomic_max(self.drop[a], d)
+        ti.loop_config(serialize=ti.static(self.serial))
+        for i in range(self.state.n_spheres[None]):
+            if self.drop[i] > 0:
+                self.state.x[i] -= self.drop[i] * up
 
     @ti.func
     def finish(self):
