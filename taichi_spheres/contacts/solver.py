@@ -247,7 +247,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         its support rows: order-free). The rows see the drifted positions, where a
         resting sphere overlaps its support by g h^2/2, so the move put such a sphere
         back at any start gap below that: it rested above the floor (docs/algorithm.md,
-        "Substeps"). Lowering only lowers potential energy and changes no velocity."""
+        "Closing support gaps"). Lowering only lowers potential energy and changes no
+        velocity."""
         up = -self.params.gravity[None].normalized()
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.state.n_spheres[None]):
