@@ -29,6 +29,8 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (settings_tradeoff, ["--variants", "=relaxation=1.8"], "a variant is NAME=FIELD=VALUE"),
     (silo_overlaps, ["--first", "0"], "--first must be >= 1"),
     (silo_overlaps, ["--variants", "=--substeps"], "a variant is NAME=OPTIONS"),
+    (silo_overlaps, ["--variants", "fine=--step-fractions 0.05"],
+     "variant 'fine': options tools/silo.py does not take"),
     (silo_seeds, ["--seeds", "1"], "at least two seeds"),
     (silo_seeds, ["--jobs", "0"], "--jobs must be >= 1"),
     (silo_seeds, ["--variants", "=--substeps"], "a variant is NAME=OPTIONS"),

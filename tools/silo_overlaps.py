@@ -21,6 +21,7 @@ sys.path.insert(0, HERE)
 
 import peer_lammps_silo  # noqa: E402  (tools/peer_lammps_silo.py)
 import silo  # noqa: E402  (tools/silo.py)
+import silo_seeds  # noqa: E402  (tools/silo_seeds.py: its variants)
 from machine import cpu_name, write_section  # noqa: E402  (tools/machine.py)
 
 #: --variants default: NAME=OPTIONS (tools/silo.py options)
@@ -69,12 +70,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.first < 1:
         ap.error("--first must be >= 1")
-    variants = []
-    for text in args.variants:
-        name, sep, opts = text.partition("=")
-        if not sep or not name.strip():
-            ap.error(f"a variant is NAME=OPTIONS, got {text!r}")
-        variants.append((name.strip(), opts.split()))
+    variants = silo_seeds.checked_variants(ap, args.variants)
     rows = {name: overlaps(opts, args.first) for name, opts in variants}
     command = "python tools/silo_overlaps.py " + " ".join(argv)
     text = report(variants, rows, args.first, command.strip())

@@ -129,16 +129,23 @@ def parse(argv=None):
         ap.error("--seeds needs at least two seeds (a spread)")
     if args.jobs < 1:
         ap.error(f"--jobs must be >= 1, got {args.jobs}")
+    args.variants = checked_variants(ap, args.variants)
+    return args
+
+
+def checked_variants(ap, texts) -> list:
+    """[(name, options)] of NAME=OPTIONS texts, each name and its tools/silo.py options
+    checked: a usage error from ``ap`` before any run."""
     try:
-        args.variants = [parse_variant(v) for v in args.variants]
+        variants = [parse_variant(v) for v in texts]
     except ValueError as exc:
         ap.error(str(exc))
-    for name, opts in args.variants:
+    for name, opts in variants:
         try:
             peer_lammps_silo.settings(opts)
         except SystemExit:             # tools/silo.py's parser said what is wrong
             ap.error(f"variant {name!r}: options tools/silo.py does not take")
-    return args
+    return variants
 
 
 def main(argv=None):
