@@ -27,6 +27,7 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (step_overlaps, ["--duration", "-1"], "--start < --duration"),
     (step_overlaps, ["--variants", "fast=relax=1.8"], "unknown tuning field 'relax'"),
     (settings_tradeoff, ["--variants", "=relaxation=1.8"], "a variant is NAME=FIELD=VALUE"),
+    (settings_tradeoff, ["--fills", "-1"], "--fills must be >= 0"),
     (silo_overlaps, ["--first", "0"], "--first must be >= 1"),
     (silo_overlaps, ["--variants", "=--substeps"], "a variant is NAME=OPTIONS"),
     (silo_overlaps, ["--variants", "fine=--step-fractions 0.05"],
@@ -68,13 +69,15 @@ def test_step_overlaps_table_names_the_command_and_both_settings():
                               variants=step_overlaps.VARIANTS)
     row = dict(brute=6.6e-4, when=1.138, reported=6.6e-4, steps=2008, substeps=2008,
                wall=1.25, velocity=100.0, position=97.5, hits=0, kinetic=4.7e-6)
-    text = step_overlaps.report(args, {"defaults": row, "substeps": dict(row, substeps=3000)})
+    text = step_overlaps.report(args, {"defaults": row,
+                                       "former defaults": dict(row, substeps=3000)})
     assert "`python tools/step_overlaps.py --start 1 --every 1 --section step-overlaps-bed " \
         "--write`" in text
     assert "| defaults | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 2008 | 1.25 | 100.0 / 97.5 | 0 " \
         "| 4.70e-06 |" in text
-    assert "| substeps | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 3000 |" in text
-    assert "- substeps: `Tuning().with_(substeps=True)`" in text
+    assert "| former defaults | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 3000 |" in text
+    assert "- former defaults: `Tuning().with_(relaxation=1.0, position_iterations=100, " \
+        "substeps=False)`" in text
 
 
 def test_step_overlaps_and_settings_tradeoff_name_their_variants():
@@ -85,12 +88,14 @@ def test_step_overlaps_and_settings_tradeoff_name_their_variants():
         step_overlaps.parse_variant("fast=relax=1.8")
     with pytest.raises(ValueError, match="not FIELD=VALUE"):
         step_overlaps.parse_variant("fast=relaxation")
-    args = argparse.Namespace(variants=["a=relaxation=1.5"], every=1, write=False)
+    args = argparse.Namespace(variants=["a=relaxation=1.5"], every=1, write=False, fills=3)
     row = dict(wall=0.9, brute=5e-5, velocity=60.0, position=58.0, kinetic=2e-6, ball=1e-3,
-               ball_step=1)
+               ball_step=1, rise=0.0, fills=(1.1, 0.95, 1.3, 450))
     text = settings_tradeoff.report(args, {"a": row})
-    assert '`python tools/settings_tradeoff.py --variants "a=relaxation=1.5"`' in text
-    assert "| a | 0.9 | 5.00e-05 | 60 / 58 | 2.0e-06 | 1.0e-03 (1) |" in text
+    assert '`python tools/settings_tradeoff.py --variants "a=relaxation=1.5" --fills 3`' \
+        in text
+    assert "| a | 0.9 | 1.1 (0.95-1.3) | 5.00e-05 | 60 / 58 | 2.0e-06 | 1.0e-03 (1) | " \
+        "0.0e+00 |" in text
     assert "- a: `Tuning().with_(relaxation=1.5)`" in text
 
 

@@ -6,7 +6,7 @@ its final positions and velocities are hashed (``observe.state_digest``). The di
 in ``tests/same_bits.json`` were computed by ``python tools/state_digest.py --write``;
 every CPU (any x86-64 model, with or without AVX-512 and FMA; ARM), both compile
 modes, the fused step and the per-colour parallel launches must reproduce them (the
-"substeps" case: the small one with Rules.substeps). A
+"plain" case: the small one with plain sweeps at 100 / 100 and no substeps). A
 change of the physics changes them on purpose: store the new ones with that command
 and say why in the commit.
 
@@ -47,7 +47,7 @@ def _cpu_only(arch):
                     "their runs with each other)")
 
 
-@pytest.mark.parametrize("case", ["small", "large", "frictional", "materials", "substeps"])
+@pytest.mark.parametrize("case", ["small", "large", "frictional", "materials", "plain"])
 def test_reference_scenes_give_the_stored_digests(arch, precision, case):
     _cpu_only(arch)
     digest, sim = _digest(case, precision)
@@ -55,7 +55,7 @@ def test_reference_scenes_give_the_stored_digests(arch, precision, case):
     assert digest == STORED[case]["digests"][precision]
 
 
-@pytest.mark.parametrize("case", ["small", "frictional", "materials", "substeps"])
+@pytest.mark.parametrize("case", ["small", "frictional", "materials", "plain"])
 def test_fused_step_gives_the_stored_digest(arch, case):
     _cpu_only(arch)
     digest, sim = _digest(case, "f64", fused=True)

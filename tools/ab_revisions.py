@@ -10,11 +10,17 @@ both revisions; a ratio within the spread of the rounds is noise.
 With ``--pour-bed`` the measure is instead the pour's settled bed: each revision's
 package (imported from its worktree) runs scenes/pour.toml to 1 s untimed, then 0.5 s
 timed, on 1 thread; reported in simulated seconds per wall second (higher is faster,
-so that the ratio B / A reads as for throughput).
+so that the ratio B / A reads as for throughput). A bed is chaotic: two revisions that
+differ in round-off take different steps, and one fill's bed speed moves by 10-20 %
+with them. ``--pour-seeds K`` runs K fills instead (the pour's ``seed`` = 1..K), each
+timed over its whole bed [1, 2] s, and reports their summed speed, their steps, and
+the wall time per step, which separates a costlier step from a trajectory that takes
+more steps.
 
     python tools/ab_revisions.py fd81525 HEAD            # N = 1e5, f64, 3 rounds
     python tools/ab_revisions.py HEAD~1 HEAD --n 10000 --rounds 5
     python tools/ab_revisions.py HEAD~1 HEAD --pour-bed --rounds 5
+    python tools/ab_revisions.py HEAD~1 HEAD --pour-bed --pour-seeds 8 --rounds 1
 """
 from __future__ import annotations
 
@@ -50,26 +56,59 @@ def throughput(tree: str, n: int, precision: str) -> float:
     return float(match.group(1))
 
 
-#: --pour-bed: run in a revision's worktree (its package is the one imported)
+#: --pour-bed: run in a revision's worktree (its package is the one imported);
+#: argv: t_start t_end seed... (no seed: scenes/pour.toml as it is)
 POUR_BED = """
-import time, taichi_spheres as ts
-sim = ts.Simulation(ts.load_scene("scenes/pour.toml"), threads=1)
-sim.advance_to(1.0)
-t0 = time.perf_counter()
-sim.advance_to(1.5)
-print("bed", 0.5 / (time.perf_counter() - t0), sim.stats["steps"])
+import re, sys, tempfile, time, taichi_spheres as ts
+t_start, t_end = float(sys.argv[1]), float(sys.argv[2])
+text = open("scenes/pour.toml").read()
+wall = steps = 0.0
+for seed in sys.argv[3:] or [None]:
+    with tempfile.NamedTemporaryFile("w", suffix=".toml") as f:
+        f.write(text if seed is None else re.sub(r"(?m)^seed = [0-9]+$", "seed = " + seed, text))
+        f.flush()
+        sim = ts.Simulation(ts.load_scene(f.name), threads=1)
+    sim.advance_to(t_start)
+    s0, t0 = sim.stats["steps"], time.perf_counter()
+    sim.advance_to(t_end)
+    wall += time.perf_counter() - t0
+    steps += sim.stats["steps"] - s0
+runs = max(len(sys.argv) - 3, 1)
+print("bed", runs * (t_end - t_start) / wall, int(steps), wall / steps)
 """
 
 
-def bed_speed(tree: str) -> float:
-    """Simulated s per wall s of the pour's bed, [1, 1.5] s, with the package of the
-    revision checked out in ``tree``."""
-    out = subprocess.run([sys.executable, "-c", POUR_BED], capture_output=True, text=True,
-                         check=True, cwd=tree)
-    match = re.search(r"^bed ([0-9.e+-]+) ", out.stdout, re.M)
+def bed_speed(tree: str, seeds: int = 0) -> tuple:
+    """(simulated s per wall s, steps, wall s per step) of the pour's bed with the
+    package of the revision checked out in ``tree``: [1, 1.5] s of scenes/pour.toml,
+    or with ``seeds`` > 0 the beds [1, 2] s of that many fills (seed 1..seeds), summed."""
+    span = ["1.0", "2.0"] if seeds else ["1.0", "1.5"]
+    out = subprocess.run([sys.executable, "-c", POUR_BED, *span,
+                          *[str(k) for k in range(1, seeds + 1)]],
+                         capture_output=True, text=True, check=True, cwd=tree)
+    match = re.search(r"^bed ([0-9.e+-]+) ([0-9]+) ([0-9.e+-]+)$", out.stdout, re.M)
     if not match:
         raise RuntimeError(f"no bed line in the run's output:\n{out.stdout[-2000:]}")
-    return float(match.group(1))
+    return float(match.group(1)), int(match.group(2)), float(match.group(3))
+
+
+def report(args, runs, beds, unit) -> None:
+    """Print the medians per revision and of the per-round ratios B / A (with --pour-bed
+    also the ratios of steps and of wall time per step)."""
+    a, b = args.rev_a, args.rev_b
+    for rev in (a, b):
+        what = "" if args.pour_bed else f"N = {args.n:,}, {args.precision}, "
+        print(f"{rev}: median {statistics.median(runs[rev]):.3e} {unit} "
+              f"({what}{args.rounds} runs)")
+    ratios = [y / x for x, y in zip(runs[a], runs[b])]
+    print(f"{b} / {a}: median {statistics.median(ratios):.3f} "
+          f"(range {min(ratios):.3f}-{max(ratios):.3f})")
+    if args.pour_bed:
+        steps = [y[1] / x[1] for x, y in zip(beds[a], beds[b])]
+        per_step = [y[2] / x[2] for x, y in zip(beds[a], beds[b])]
+        print(f"{b} / {a}: steps median {statistics.median(steps):.3f}, wall per step "
+              f"median {statistics.median(per_step):.3f} "
+              f"(range {min(per_step):.3f}-{max(per_step):.3f})")
 
 
 def main(argv=None):
@@ -81,7 +120,11 @@ def main(argv=None):
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--pour-bed", action="store_true",
                    help="measure the pour's bed (simulated s per wall s) instead")
+    p.add_argument("--pour-seeds", type=int, default=0, metavar="K",
+                   help="with --pour-bed: K fills (seed 1..K), each over [1, 2] s")
     args = p.parse_args(argv)
+    if args.pour_seeds < 0 or (args.pour_seeds and not args.pour_bed):
+        p.error("--pour-seeds takes a count >= 0 and needs --pour-bed")
     unit = "simulated s per wall s (pour bed, 1 thread)" if args.pour_bed else \
         "sphere-steps/s"
     where = tempfile.mkdtemp(prefix="ab_revisions_")
@@ -90,18 +133,19 @@ def main(argv=None):
         for rev in (args.rev_a, args.rev_b):
             trees[rev] = checkout(rev, where)
         runs = {args.rev_a: [], args.rev_b: []}
+        beds = {args.rev_a: [], args.rev_b: []}
         for k in range(args.rounds):
             for rev in (args.rev_a, args.rev_b):
-                runs[rev].append(bed_speed(trees[rev]) if args.pour_bed else
-                                 throughput(trees[rev], args.n, args.precision))
-                print(f"round {k + 1} {rev}: {runs[rev][-1]:.3e} {unit}", flush=True)
-        ratios = [b / a for a, b in zip(runs[args.rev_a], runs[args.rev_b])]
-        for rev in (args.rev_a, args.rev_b):
-            what = "" if args.pour_bed else f"N = {args.n:,}, {args.precision}, "
-            print(f"{rev}: median {statistics.median(runs[rev]):.3e} {unit} "
-                  f"({what}{args.rounds} runs)")
-        print(f"{args.rev_b} / {args.rev_a}: median {statistics.median(ratios):.3f} "
-              f"(range {min(ratios):.3f}-{max(ratios):.3f})")
+                if args.pour_bed:
+                    beds[rev].append(bed_speed(trees[rev], args.pour_seeds))
+                    speed, steps, per_step = beds[rev][-1]
+                    runs[rev].append(speed)
+                    print(f"round {k + 1} {rev}: {speed:.3e} {unit}, {steps} steps, "
+                          f"{per_step * 1e3:.2f} ms per step", flush=True)
+                else:
+                    runs[rev].append(throughput(trees[rev], args.n, args.precision))
+                    print(f"round {k + 1} {rev}: {runs[rev][-1]:.3e} {unit}", flush=True)
+        report(args, runs, beds, unit)
     finally:
         for tree in trees.values():
             subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", tree],

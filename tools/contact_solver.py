@@ -183,9 +183,13 @@ FAST = "relaxation 1.8, 40 / 40 sweeps, shock propagation on"
 RELAXED_BEDS = dict(relaxation=1.8, contact_iterations=70, position_iterations=50)
 RELAXED = "relaxation 1.8, 70 / 50 sweeps"
 
+#: the contact solver's defaults before over-relaxation and substeps (CHANGELOG)
+FORMER = "former defaults: plain, 100 / 100, no substeps"
+FORMER_DEFAULTS = dict(relaxation=1.0, position_iterations=100, substeps=False)
+
 #: --bed-settings: short names of the FCC bed rows' settings
 BED_SETTINGS = {"defaults": "defaults", "fast": FAST, "shock": "shock propagation on",
-                "relaxed": RELAXED}
+                "relaxed": RELAXED, "former": FORMER}
 
 #: a heavy-ball row's settings with the warm start unbounded (Rules.bounded_warm_start)
 PLAIN_WARM = ", plain warm start"
@@ -194,6 +198,7 @@ PLAIN_WARM = ", plain warm start"
 SETTINGS = {"defaults": {}, "relaxation 1.8": dict(relaxation=1.8),
             RELAXED: RELAXED_BEDS,
             "shock propagation on": dict(shock_propagation="on"), FAST: FAST_BEDS,
+            FORMER: FORMER_DEFAULTS,
             "defaults" + PLAIN_WARM: dict(bounded_warm_start="off"),
             FAST + PLAIN_WARM: dict(FAST_BEDS, bounded_warm_start="off")}
 

@@ -12,16 +12,26 @@ For each named setting (``NAME=FIELD=VALUE ...``, Tuning fields):
 - a ball 8x heavier dropped onto the 256-sphere FCC block settled under the same
   setting, frictionless (tools/warm_start_energy.py ``drop``): the largest growth of
   the total energy in one of the next 300 steps / the ball's impact energy, and the
-  step. Its first step starts the solver cold (a new Simulation has no warm start).
+  step. Its first step starts the solver cold (a new Simulation has no warm start);
+- the same 256-sphere block settling from its lattice (neighbours 1e-6 diameters
+  apart), 150 steps: how far the total energy ever rises above its start / the start
+  (0: never; a dissipative scene, where it should never rise);
+- the pour's bed over ``--fills`` fills (the pour's ``seed`` 1..K, each run to 1 s,
+  then its bed [1, 2] s timed with ``advance_to``): summed wall s per simulated s and
+  the range over the fills. A bed is chaotic (a setting changes its trajectory, and
+  one fill's bed takes +-20 % steps with it): the summed figure is the one to compare.
 
-    python tools/settings_tradeoff.py --write         # ~10 min on 1 core
+    python tools/settings_tradeoff.py --write         # ~20 min on 1 core
 """
 from __future__ import annotations
 
 import argparse
 import datetime
 import os
+import re
 import sys
+import tempfile
+import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.join(HERE, "..")
@@ -29,52 +39,104 @@ sys.path.insert(0, ROOT)
 sys.path.insert(0, HERE)
 
 import taichi_spheres as ts  # noqa: E402
+from taichi_spheres.builders import fcc_block  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
 from step_overlaps import parse_variant, run  # noqa: E402  (tools/step_overlaps.py)
 from warm_start_energy import drop, settled_block  # noqa: E402
 
-#: --variants default
+#: --variants default: the former defaults, and over-relaxed sweeps with substeps at
+#: several caps (the defaults are 100 / 60)
 VARIANTS = [
-    "defaults=",
-    "substeps=substeps=True",
-    "ω 1.8, substeps=relaxation=1.8 substeps=True",
+    "former defaults: plain, 100 / 100=relaxation=1.0 contact_iterations=100 "
+    "position_iterations=100 substeps=False",
+    "ω 1.8, 100 / 100, substeps=relaxation=1.8 contact_iterations=100 "
+    "position_iterations=100 substeps=True",
+    "ω 1.8, 80 / 80, substeps=relaxation=1.8 contact_iterations=80 position_iterations=80 "
+    "substeps=True",
+    "ω 1.8, 100 / 60, substeps=relaxation=1.8 contact_iterations=100 "
+    "position_iterations=60 substeps=True",
     "ω 1.8, 60 / 60, substeps=relaxation=1.8 contact_iterations=60 position_iterations=60 "
     "substeps=True",
-    "ω 1.8, 40 / 40, shock, substeps=relaxation=1.8 contact_iterations=40 "
-    "position_iterations=40 shock_propagation=on substeps=True",
 ]
 
 
-def measure(name: str, changes: dict, every: int) -> dict:
-    """The pour's bed and the heavy ball under Tuning().with_(**changes)."""
+#: --fills default
+FILLS = 8
+
+
+def block_energy_rise(tuning, steps: int = 150) -> float:
+    """The 256-sphere FCC block settling from its lattice under ``tuning``: the largest
+    total energy above the start over ``steps`` steps / the start energy (0 if never)."""
+    sim = ts.Simulation(fcc_block((4, 4, 4), radius=0.01, restitution=0.5), threads=1,
+                        tuning=tuning)
+    start = highest = sim.energy_budget()["current"]
+    for _ in range(steps):
+        sim.advance(sim.max_step())
+        highest = max(highest, sim.energy_budget()["current"])
+    return (highest - start) / abs(start)
+
+
+def pour_fills(changes: dict, fills: int) -> tuple:
+    """(summed wall s per simulated s, fastest fill, slowest fill, summed steps) of the
+    pour's bed [1, 2] s over fills seed = 1..fills under Tuning().with_(**changes)."""
+    text = open(os.path.join(ROOT, "scenes", "pour.toml")).read()
+    walls, steps = [], 0
+    for seed in range(1, fills + 1):
+        with tempfile.NamedTemporaryFile("w", suffix=".toml") as f:
+            f.write(re.sub(r"(?m)^seed = [0-9]+$", f"seed = {seed}", text))
+            f.flush()
+            scene = ts.load_scene(f.name)
+        sim = ts.Simulation(scene, threads=1, tuning=Tuning().with_(**changes))
+        sim.advance_to(1.0)
+        s0, t0 = sim.stats["steps"], time.perf_counter()
+        sim.advance_to(2.0)
+        walls.append(time.perf_counter() - t0)
+        steps += sim.stats["steps"] - s0
+    return sum(walls) / fills, min(walls), max(walls), steps
+
+
+def measure(name: str, changes: dict, every: int, fills: int) -> dict:
+    """The pour's bed, the heavy ball, the settling block and the fills under
+    Tuning().with_(**changes)."""
     scene = ts.load_scene(os.path.join(ROOT, "scenes", "pour.toml"))
     bed = run(scene, 1.0, 2.0, every, changes)
     tuning = Tuning().with_(**changes)
     block, settled = settled_block(0.0, tuning)
     ball = drop(block, settled, 8.0, "auto", 300, tuning)
-    print(name, bed, ball, flush=True)
-    return dict(bed, ball=ball["growth"], ball_step=ball["step"])
+    rise = block_energy_rise(tuning)
+    many = pour_fills(changes, fills) if fills else None
+    print(name, bed, ball, rise, many, flush=True)
+    return dict(bed, ball=ball["growth"], ball_step=ball["step"], rise=rise, fills=many)
 
 
 def report(args, rows) -> str:
     """The markdown section."""
     extra = "" if args.variants == VARIANTS else \
         " --variants " + " ".join(f'"{v}"' for v in args.variants)
+    fills = f"--fills {args.fills}" if args.fills != FILLS else ""
+    extra = " ".join(x for x in (extra.strip(), fills) if x)
     lines = [f"{datetime.date.today()}, {cpu_name()}, 1 thread, f64: `python "
-             f"tools/settings_tradeoff.py{extra}{' --write' if args.write else ''}`.", "",
+             f"tools/settings_tradeoff.py{' ' + extra if extra else ''}"
+             f"{' --write' if args.write else ''}`.", "",
              "Pour's bed [1, 2] s (steps one by one; brute-force overlap after "
-             f"{'every step' if args.every == 1 else f'every {args.every}th step'}); a ball 8x "
-             "heavier dropped onto the settled 256-sphere block, frictionless, largest "
-             "one-step growth of the total energy / its impact energy (and the step; step 1 "
-             "is the cold start of a new Simulation):", "",
-             "| settings | bed wall s / sim s | bed overlap / d, largest | sweeps per solve "
-             "(velocity / position) | K(2 s) / E0 | heavy ball: energy growth / impact "
-             "energy (step) |", "|---|---|---|---|---|---|"]
+             f"{'every step' if args.every == 1 else f'every {args.every}th step'}), and "
+             f"over {args.fills} fills (seed 1..{args.fills}; summed, and the fastest and "
+             "slowest fill); a ball 8x heavier dropped onto the settled 256-sphere block, "
+             "frictionless, largest one-step growth of the total energy / its impact energy "
+             "(and the step; step 1 is the cold start of a new Simulation); the block "
+             "settling from its lattice, largest rise of its total energy above the start "
+             "/ the start (0: never):", "",
+             "| settings | bed wall s / sim s | over the fills (fastest-slowest) | bed overlap "
+             "/ d, largest | sweeps per solve (velocity / position) | K(2 s) / E0 | heavy "
+             "ball: energy growth / impact energy (step) | block settling: energy rise |",
+             "|---|---|---|---|---|---|---|---|"]
     for name, r in rows.items():
-        lines.append(f"| {name} | {r['wall']:.3g} | {r['brute']:.2e} | {r['velocity']:.0f} / "
-                     f"{r['position']:.0f} | {r['kinetic']:.1e} | {r['ball']:.1e} "
-                     f"({r['ball_step']}) |")
+        many = "" if r["fills"] is None else \
+            f"{r['fills'][0]:.3g} ({r['fills'][1]:.3g}-{r['fills'][2]:.3g})"
+        lines.append(f"| {name} | {r['wall']:.3g} | {many} | {r['brute']:.2e} | "
+                     f"{r['velocity']:.0f} / {r['position']:.0f} | {r['kinetic']:.1e} | "
+                     f"{r['ball']:.1e} ({r['ball_step']}) | {r['rise']:.1e} |")
     lines.append("")
     for v in args.variants:
         name, changes = parse_variant(v)
@@ -87,14 +149,18 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--variants", nargs="+", default=VARIANTS, metavar="NAME=CHANGES")
     ap.add_argument("--every", type=int, default=1, help="check overlaps after every N-th step")
+    ap.add_argument("--fills", type=int, default=FILLS,
+                    help="pour fills whose beds are timed (0: none)")
     ap.add_argument("--write", action="store_true", help="write into docs/bench.md")
     ap.add_argument("--section", default="settings-tradeoff", help="docs/bench.md section")
     args = ap.parse_args(argv)
+    if args.fills < 0:
+        ap.error("--fills must be >= 0")
     try:
         variants = [parse_variant(v) for v in args.variants]
     except ValueError as err:
         ap.error(str(err))
-    rows = {name: measure(name, changes, args.every) for name, changes in variants}
+    rows = {name: measure(name, changes, args.every, args.fills) for name, changes in variants}
     publish(report(args, rows), args.section, args.write)
     return 0
 

@@ -25,7 +25,8 @@ import silo_seeds  # noqa: E402  (tools/silo_seeds.py: its variants)
 from machine import cpu_name, write_section  # noqa: E402  (tools/machine.py)
 
 #: --variants default: NAME=OPTIONS (tools/silo.py options)
-VARIANTS = ["defaults=", "substeps=--substeps"]
+#: the defaults, and the former ones (plain sweeps at 100 / 100, no substeps)
+VARIANTS = ["defaults=", "former defaults=--relaxation 1.0 --position-sweeps 100 --no-substeps"]
 
 
 def overlaps(options, first: int) -> dict:

@@ -39,7 +39,8 @@ import silo  # noqa: E402  (tools/silo.py)
 from machine import cpu_name, write_section  # noqa: E402
 
 #: --variants default: NAME=OPTIONS (tools/silo.py options)
-VARIANTS = ["defaults=", "substeps=--substeps"]
+#: the defaults, and the former ones (plain sweeps at 100 / 100, no substeps)
+VARIANTS = ["defaults=", "former defaults=--relaxation 1.0 --position-sweeps 100 --no-substeps"]
 #: the row name of LAMMPS's rates (--lammps)
 LAMMPS = "LAMMPS"
 

@@ -100,7 +100,9 @@ def report(args, rows) -> str:
 
 
 #: --variants default: NAME=CHANGES (blank-separated Tuning field=value pairs)
-VARIANTS = ["defaults=", "substeps=substeps=True"]
+#: the defaults, and the former ones (plain sweeps at 100 / 100, no substeps)
+VARIANTS = ["defaults=",
+            "former defaults=relaxation=1.0 position_iterations=100 substeps=False"]
 
 
 def parse_variant(text: str) -> tuple:
