@@ -104,6 +104,19 @@ def test_scene_defaults():
     assert args.out.endswith(os.path.join("docs", "peer_lammps_pour.md"))
 
 
+def test_rerun_command_keeps_the_report_file_and_tuning():
+    """The report's last line reruns it into the same file with the same settings."""
+    args, ap = _scene_args()
+    peer_lammps.scene_args(args, ap)
+    assert peer_lammps.rerun_command(args) == \
+        "python tools/peer_lammps.py --scene scenes/pour.toml --phases 1 2 --only taichi"
+    args.out, args.tuning = "docs/peer_lammps_pour_fast.md", dict(contact_iterations=40,
+                                                                  shock_propagation="on")
+    assert peer_lammps.rerun_command(args).endswith(
+        "--only taichi --out docs/peer_lammps_pour_fast.md --tuning contact_iterations=40 "
+        "shock_propagation=on")
+
+
 def test_saved_run_needs_the_same_scene(tmp_path):
     args, ap = _scene_args(("phases", [1.0, 2.0]))
     peer_lammps.scene_args(args, ap)

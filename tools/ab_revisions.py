@@ -65,7 +65,10 @@ text = open("scenes/pour.toml").read()
 wall = steps = 0.0
 for seed in sys.argv[3:] or [None]:
     with tempfile.NamedTemporaryFile("w", suffix=".toml") as f:
-        f.write(text if seed is None else re.sub(r"(?m)^seed = [0-9]+$", "seed = " + seed, text))
+        filled, found = re.subn(r"(?m)^seed = [0-9]+$", "seed = " + (seed or "0"), text)
+        if seed is not None and found != 1:
+            sys.exit("scenes/pour.toml has no single 'seed = N' line to vary")
+        f.write(text if seed is None else filled)
         f.flush()
         sim = ts.Simulation(ts.load_scene(f.name), threads=1)
     sim.advance_to(t_start)

@@ -8,19 +8,22 @@ columns, warm starting, and a large lattice bed held on 1 and 2 threads.
   t = 2 s (brute force, / diameter), kinetic energy at 2 s / initial energy,
   sweep-limit hits and unresolved overlaps in the bed phase, velocity and position
   sweeps per step, the largest residual in the bed phase;
-- column: 20 equal spheres, and 20 with the upper half 10 and 10^3 times heavier, settling
+- column (plain sweeps at 100 / 100 without substeps, the former defaults, unless a
+  row says otherwise): 20 equal spheres, and 20 with the upper half 10 and 10^3 times heavier, settling
   on the floor for 3 s: largest speed, overlap, sweeps per step at the end (the 10^3
   column also with Rules.shock_propagation off: unequal masses have it by default, and
   with Rules.relaxation 1.8);
 - warm start: the settled column's velocity sweeps per step with and without it;
 - heavy ball: a ball 8 x heavier dropped onto a settled FCC block, the largest growth
-  of the total energy in one step, at the defaults, at relaxation 1.8, with
+  of the total energy in one step, at the defaults, at relaxation 1.8 with the former
+  defaults otherwise (100 / 100 sweeps, no substeps), with
   RELAXED_BEDS (relaxation 1.8, 70 / 50 sweeps) and with the faster bed settings
   FAST_BEDS (relaxation 1.8, 40 / 40 sweeps, shock propagation on);
 - error against run time: the pour's bed phase again from its state at t1 with
   velocity/position sweep caps 10, 30, 100 and 300, and 30 and 100 with shock
   propagation on (equal masses: off by default), with over-relaxation 1.5 and 1.8
-  (Rules.relaxation; 1 by default; 1.8 from 40 to 100 sweeps, 70 / 50, 40 and 50
+  (Rules.relaxation, 1.8 by default; all rows here without substeps and plain unless
+  they say so; 1.8 from 40 to 100 sweeps, 70 / 50, 40 and 50
   also with shock propagation on), and at step fraction 0.25 (default 0.1), each
   with the largest overlap after a step and the largest growth of the total energy
   in one step over the phase;
@@ -109,7 +112,8 @@ def pour(scene_path, t1, t2):
 
 
 #: one row of the error-against-run-time table: sweep caps, Rules.shock_propagation,
-#: Rules.relaxation and the step fraction the bed phase runs with
+#: Rules.relaxation and the step fraction the bed phase runs with (without substeps,
+#: as the table in docs/bench.md)
 Variant = collections.namedtuple("Variant", "vel pos shock omega step_fraction",
                                  defaults=("auto", 1.0, DEFAULT_STEP_FRACTION))
 
@@ -135,7 +139,8 @@ def bed_with_caps(p, variants):
     out = {}
     for var in variants:
         tuning = Tuning().with_(contact_iterations=var.vel, position_iterations=var.pos,
-                                shock_propagation=var.shock, relaxation=var.omega)
+                                shock_propagation=var.shock, relaxation=var.omega,
+                                substeps=False)
         sim = ts.Simulation(p["scene"], tuning=tuning, step_fraction=var.step_fraction)
         sim.restore(dict(p["at_t1"], step_fraction=var.step_fraction))
         growth = {}
@@ -162,7 +167,8 @@ def column(ratio: float, seconds: float, warm_start=True, shock="auto", omega=1.
                                  box=((0, 0, 0), (0.1, 0.1, 0.6)), gravity=(0, 0, -G),
                                  restitution=0.5, wall_restitution=0.5)
     sim = ts.Simulation(scene, tuning=Tuning().with_(warm_start=warm_start,
-                                                     shock_propagation=shock, relaxation=omega))
+                                                     shock_propagation=shock, relaxation=omega,
+                                                     substeps=False, position_iterations=100))
     sim.advance(seconds - 0.5)
     _, c = window(sim, seconds)
     st = sim.state()
@@ -195,7 +201,7 @@ BED_SETTINGS = {"defaults": "defaults", "fast": FAST, "shock": "shock propagatio
 PLAIN_WARM = ", plain warm start"
 
 #: the settings of the heavy-ball rows and of the FCC bed rows, by name
-SETTINGS = {"defaults": {}, "relaxation 1.8": dict(relaxation=1.8),
+SETTINGS = {"defaults": {}, "relaxation 1.8": dict(FORMER_DEFAULTS, relaxation=1.8),
             RELAXED: RELAXED_BEDS,
             "shock propagation on": dict(shock_propagation="on"), FAST: FAST_BEDS,
             FORMER: FORMER_DEFAULTS,

@@ -3,7 +3,9 @@
 incline in both regimes, Walton's oblique impacts between two spheres and on a wall.
 
 Reported per case: the measured value, the closed form and the relative error, in f64
-and f32 (the same cases as tests/test_friction.py, which asserts them).
+and f32 (the same cases as tests/test_friction.py, which asserts them); the cases on a
+support at the default over-relaxation (Rules.relaxation 1.8: within the solver's
+tolerance) and with plain sweeps (1.0: round-off).
 
     python tools/friction_checks.py            # ~1 min on 2 cores
     python tools/friction_checks.py --write    # the 'closed forms' section of docs/granular.md
@@ -23,6 +25,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres import observe  # noqa: E402
+from taichi_spheres.config import Tuning  # noqa: E402
 from taichi_spheres.reference import walton_impact  # noqa: E402
 from machine import cpu_name, write_section  # noqa: E402  (tools/machine.py)
 
@@ -30,24 +33,28 @@ G = 9.81
 DOCS = os.path.join(os.path.dirname(__file__), "..", "docs")
 
 
-def sliding(precision) -> tuple:
+#: Rules.relaxation of the cases on a support: the default, and plain sweeps
+RELAXATIONS = (Tuning().physics.relaxation, 1.0)
+
+
+def sliding(precision, relaxation) -> tuple:
     """(final speed, 5/7 v0) of a sphere launched sliding at v0 = 1 m/s, mu = 0.3."""
     r, mu = 0.05, 0.3
     sc = ts.Scene.from_arrays([[0.2, 0.5, r]], [[1.0, 0, 0]], r, box=((0, 0, 0), (2, 1, 1)),
                               restitution=0.5, wall_restitution=0.5, friction=mu)
-    sim = ts.Simulation(sc, precision=precision)
+    sim = ts.Simulation(sc, precision=precision, tuning=Tuning().with_(relaxation=relaxation))
     sim.advance(0.5)
     return sim.state().v[0, 0], 5 / 7
 
 
-def incline(precision, degrees) -> tuple:
+def incline(precision, degrees, relaxation) -> tuple:
     """(speed after 0.1 s, the closed form) on a plane tilted by ``degrees``, mu = 0.3."""
     r, mu, th = 0.02, 0.3, math.radians(degrees)
     n = np.array([-math.sin(th), 0.0, math.cos(th)])
     p0 = np.array([0.5, 0.5, 0.5])
     sc = ts.Scene.from_arrays([p0 + r * n], [[0, 0, 0]], r, restitution=0.5,
                               wall_restitution=0.5, friction=mu, geometry=[ts.Plane(p0, n)])
-    sim = ts.Simulation(sc, precision=precision)
+    sim = ts.Simulation(sc, precision=precision, tuning=Tuning().with_(relaxation=relaxation))
     sim.advance(0.1)
     a = 5 / 7 * G * math.sin(th) if math.tan(th) <= 3.5 * mu else \
         G * (math.sin(th) - mu * math.cos(th))
@@ -82,13 +89,15 @@ def pair_impact(beta0, w1) -> tuple:
 def rows() -> list:
     """(case, precision, measured, expected or note, relative error) of every check."""
     out = []
-    for p in ("f64", "f32"):
-        got, want = sliding(p)
-        out.append(("sliding to rolling: final speed / v0", p, got, want, abs(got / want - 1)))
-        for deg, regime in ((20.0, "rolls"), (60.0, "slides")):
-            got, want = incline(p, deg)
-            out.append((f"incline {deg:g} deg ({regime}): speed at 0.1 s [m/s]", p, got, want,
-                        abs(got / want - 1)))
+    for omega in RELAXATIONS:
+        for p in ("f64", "f32"):
+            got, want = sliding(p, omega)
+            out.append((f"sliding to rolling: final speed / v0, relaxation {omega:g}", p, got,
+                        want, abs(got / want - 1)))
+            for deg, regime in ((20.0, "rolls"), (60.0, "slides")):
+                got, want = incline(p, deg, omega)
+                out.append((f"incline {deg:g} deg ({regime}): speed at 0.1 s [m/s], "
+                            f"relaxation {omega:g}", p, got, want, abs(got / want - 1)))
     for beta0, w1, label in ((0.35, (0, 0, 0), "sticking"), (0.35, (0, 400, -100), "sliding"),
                              (-1.0, (0, 0, 0), "beta0 = -1")):
         err, dl = pair_impact(beta0, w1)

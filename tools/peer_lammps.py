@@ -874,8 +874,9 @@ def scene_args(args, ap):
     args.phases = scene_phases(args, scene, ap)
     args.scene_file = os.path.relpath(os.path.abspath(args.scene), os.path.abspath(ROOT))
     args.scene_digest = scene_digest(scene)
+    args.default_out = os.path.abspath(os.path.join(ROOT, "docs", f"peer_lammps_{scene.name}.md"))
     if args.out is None:
-        args.out = os.path.normpath(os.path.join(ROOT, "docs", f"peer_lammps_{scene.name}.md"))
+        args.out = args.default_out
     return scene
 
 
@@ -1084,11 +1085,24 @@ def scene_result_lines(args, results, overlap):
     if len(results) == 2:
         lines += ["LAMMPS wall time / taichi_spheres wall time per simulated second: "
                   + ratio_text(results, args.phases) + ".", ""]
-    json_opt = f" --lammps-json {args.lammps_json}" if args.lammps_json else ""
-    lines += [f"Rerun taichi_spheres only, against the saved LAMMPS run: `python "
-              f"tools/peer_lammps.py --scene {args.scene_file} --phases {t1:g} {t2:g} "
-              f"--only taichi{json_opt}`.", ""]
+    lines += [f"Rerun taichi_spheres only, against the saved LAMMPS run: `{rerun_command(args)}`.",
+              ""]
     return lines
+
+
+def rerun_command(args) -> str:
+    """The command that reruns this --scene report's taichi_spheres side against its saved
+    LAMMPS run, into the same file with the same --tuning."""
+    t1, t2 = args.phases
+    cmd = (f"python tools/peer_lammps.py --scene {args.scene_file} --phases {t1:g} {t2:g} "
+           "--only taichi")
+    if args.lammps_json:
+        cmd += f" --lammps-json {args.lammps_json}"
+    if os.path.abspath(args.out) != args.default_out:
+        cmd += f" --out {os.path.relpath(os.path.abspath(args.out), os.path.abspath(ROOT))}"
+    if args.tuning:
+        cmd += " --tuning " + " ".join(f"{k}={v}" for k, v in args.tuning.items())
+    return cmd
 
 
 def write_scene_markdown(args, scene, results, overlap, elapsed, saved, loads):

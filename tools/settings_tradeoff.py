@@ -83,8 +83,11 @@ def pour_fills(changes: dict, fills: int) -> tuple:
     text = open(os.path.join(ROOT, "scenes", "pour.toml")).read()
     walls, steps = [], 0
     for seed in range(1, fills + 1):
+        filled, found = re.subn(r"(?m)^seed = [0-9]+$", f"seed = {seed}", text)
+        if found != 1:
+            raise RuntimeError("scenes/pour.toml has no single 'seed = N' line to vary")
         with tempfile.NamedTemporaryFile("w", suffix=".toml") as f:
-            f.write(re.sub(r"(?m)^seed = [0-9]+$", f"seed = {seed}", text))
+            f.write(filled)
             f.flush()
             scene = ts.load_scene(f.name)
         sim = ts.Simulation(scene, threads=1, tuning=Tuning().with_(**changes))
@@ -120,9 +123,10 @@ def report(args, rows) -> str:
              f"tools/settings_tradeoff.py{' ' + extra if extra else ''}"
              f"{' --write' if args.write else ''}`.", "",
              "Pour's bed [1, 2] s (steps one by one; brute-force overlap after "
-             f"{'every step' if args.every == 1 else f'every {args.every}th step'}), and "
-             f"over {args.fills} fills (seed 1..{args.fills}; summed, and the fastest and "
-             "slowest fill); a ball 8x heavier dropped onto the settled 256-sphere block, "
+             f"{'every step' if args.every == 1 else f'every {args.every}th step'})"
+             + (f", and over {args.fills} fills (seed 1..{args.fills}; summed, and the "
+                "fastest and slowest fill)" if args.fills else "")
+             + "; a ball 8x heavier dropped onto the settled 256-sphere block, "
              "frictionless, largest one-step growth of the total energy / its impact energy "
              "(and the step; step 1 is the cold start of a new Simulation); the block "
              "settling from its lattice, largest rise of its total energy above the start "

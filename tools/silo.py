@@ -189,7 +189,7 @@ def parse(argv=None):
                    help="switch on the contact solver's shock propagation pass")
     p.add_argument("--substeps", action=argparse.BooleanOptionalAction, default=None,
                    help="drift and impacts in substeps, the contact solver once per step "
-                        "(Rules.substeps; default: Rules', off); --no-substeps: one drift "
+                        "(Rules.substeps; default: Rules', on); --no-substeps: one drift "
                         "per solve")
     p.add_argument("--write", action="store_true", help="write docs/granular.md's section")
     p.add_argument("--no-write", dest="write", action="store_false")

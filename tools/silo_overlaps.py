@@ -5,7 +5,7 @@
 (``last_step["max_overlap"]``, over every pair, wall and object) in the first steps
 and over the rest of the discharge.
 
-    python tools/silo_overlaps.py --write                # defaults and substeps, ~3 min
+    python tools/silo_overlaps.py --write                # defaults, former defaults; ~3 min
     python tools/silo_overlaps.py --variants "defaults=" "fine=--step-fraction 0.05"
 """
 from __future__ import annotations

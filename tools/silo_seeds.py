@@ -7,7 +7,7 @@ this short discharge varies from one trajectory to the next, against how much a 
 For each lattice seed (tools/silo.py ``fill_positions``: the same silo, another
 jitter) the fill is settled with the orifice closed at the defaults, then discharged
 through the orifice with each variant (a name and tools/silo.py options, default: the
-defaults and ``--substeps``); the steady rate is fitted as in tools/silo.py
+defaults and the former defaults, plain sweeps at 100 / 100 without substeps); the steady rate is fitted as in tools/silo.py
 (``steady_rate``). With ``--lammps``, LAMMPS settles and discharges each seed's lattice
 as in tools/peer_lammps_silo.py. Reported: each rate; per variant the mean, standard
 deviation and standard error of the mean over the seeds, and the mean wall seconds per

@@ -56,7 +56,10 @@ def capture(scene_path: str, at: float) -> dict:
     scene = ts.load_scene(scene_path)
     # the parallel solver path (same bits as the serial one) runs its sweeps from
     # Python, where the problem can be read between the warm start and the sweeps
-    tuning = Tuning().with_(serial_heavy_below=0, serial_solver_below=0)
+    # plain sweeps without substeps, as the numpy sweeps here (pgs) and the figures of
+    # docs/bench.md (the contact solver's former defaults)
+    tuning = Tuning().with_(serial_heavy_below=0, serial_solver_below=0, relaxation=1.0,
+                            substeps=False, position_iterations=100)
     sim = ts.Simulation(scene, threads=1, tuning=tuning)
     sim.advance_to(at)
     solver = sim._engine.solver

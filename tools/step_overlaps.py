@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Overlaps after a step, measured brute force, against what stats["max_overlap"]
-reports, for named settings (default: the defaults and Rules.substeps), with their
+reports, for named settings (default: the defaults and the former defaults, plain
+sweeps at 100 / 100 without substeps), with their
 wall time, sweeps per step and kinetic energy at the end.
 
 stats["max_overlap"] is the largest overlap after a step: the contact solver measures
@@ -139,7 +140,7 @@ def main(argv=None):
     ap.add_argument("--section", default="step-overlaps", help="docs/bench.md section")
     ap.add_argument("--variants", nargs="+", default=VARIANTS, metavar="NAME=CHANGES",
                     help='settings to compare, e.g. "fast=relaxation=1.8 substeps=True" '
-                         '(default: the defaults and substeps)')
+                         '(default: the defaults and the former defaults)')
     args = ap.parse_args(argv)
     if not 0 <= args.start < args.duration or args.every < 1:
         ap.error("need 0 <= --start < --duration and --every >= 1")

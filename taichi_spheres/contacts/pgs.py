@@ -4,7 +4,7 @@ interleaved: sweep_cells), colours in turn.
 
 Row update (Catto's sequential impulses, Moreau–Jean): with u_n the row's normal
 relative velocity (separating > 0), lambda = max(lambda + omega m_eff (target - u_n),
-0) and the change applied to both spheres (Rules.relaxation = omega, 1 by default).
+0) and the change applied to both spheres (Rules.relaxation = omega, 1.8 by default).
 Over-relaxed sweeps (omega != 1) overshoot: a solve stops only after a plain sweep
 (omega = 1) left every row within tolerance, and the last Rules.plain_sweeps sweeps of
 the cap run plain, so a solve stopped at its cap does not keep the overshoot.
