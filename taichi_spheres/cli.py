@@ -635,9 +635,15 @@ def _run_frames(sim, outputs: RunOutputs, progress, settings, start_frame):
 
 
 def _print_summary(sim, render_seconds):
+    """The run's last line (stderr): wall and simulated time, steps (and the substeps
+    they ran in, where Rules.substeps split them: the work estimate counts those),
+    collisions, overlap, rendering time."""
     st = sim.stats
+    substeps = st.get("substeps", st["steps"])
+    steps = f"{st['steps']} steps" + (f" in {substeps} substeps" if substeps != st["steps"]
+                                      else "")
     print(f"simulation: {sim.sim_seconds:.2f} s wall for {sim.time:g} s simulated, "
-          f"{st['steps']} steps, {st['pair_collisions']} pair + {st['wall_collisions']} wall "
+          f"{steps}, {st['pair_collisions']} pair + {st['wall_collisions']} wall "
           f"collisions, max overlap {st['max_overlap']:.2e}, unresolved {st['unresolved']}; "
           f"rendering: {render_seconds:.2f} s", file=sys.stderr)
 

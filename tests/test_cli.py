@@ -429,3 +429,17 @@ def test_interrupt_keeps_a_valid_trajectory(tmp_path):
     frames = gsd_frames(tmp_path / "long.gsd")
     assert len(frames) == len(rows) >= 5
     assert [t for _, t, _ in frames] == [float(row["time"]) for row in rows]
+
+
+def test_summary_names_the_substeps_the_steps_ran_in(capsys):
+    """The work estimate counts moves (substeps); the summary says how many solver steps
+    they were grouped into."""
+    from types import SimpleNamespace
+    from taichi_spheres import cli
+    stats = dict(steps=1120, substeps=12000, pair_collisions=10, wall_collisions=77,
+                 max_overlap=0.0, unresolved=0)
+    cli._print_summary(SimpleNamespace(stats=stats, sim_seconds=4.8, time=12.0), 3.0)
+    assert "1120 steps in 12000 substeps, 10 pair + 77 wall" in capsys.readouterr().err
+    cli._print_summary(SimpleNamespace(stats=dict(stats, substeps=1120), sim_seconds=4.8,
+                                       time=12.0), 3.0)
+    assert "1120 steps, 10 pair" in capsys.readouterr().err
