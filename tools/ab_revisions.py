@@ -64,11 +64,12 @@ t_start, t_end = float(sys.argv[1]), float(sys.argv[2])
 text = open("scenes/pour.toml").read()
 wall = steps = 0.0
 for seed in sys.argv[3:] or [None]:
+    filled, found = (text, 1) if seed is None else \
+        re.subn(r"(?m)^seed = [0-9]+$", "seed = " + seed, text)
+    if found != 1:
+        sys.exit("scenes/pour.toml has no single 'seed = N' line to vary")
     with tempfile.NamedTemporaryFile("w", suffix=".toml") as f:
-        filled, found = re.subn(r"(?m)^seed = [0-9]+$", "seed = " + (seed or "0"), text)
-        if seed is not None and found != 1:
-            sys.exit("scenes/pour.toml has no single 'seed = N' line to vary")
-        f.write(text if seed is None else filled)
+        f.write(filled)
         f.flush()
         sim = ts.Simulation(ts.load_scene(f.name), threads=1)
     sim.advance_to(t_start)
