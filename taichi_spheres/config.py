@@ -56,6 +56,12 @@ class Rules:
         warm friction impulse add energy: in a discharging silo that cut the friction
         the warm start carries from step to step (docs/algorithm.md).
     position_iterations: pseudo-velocity (split impulse) sweeps per step at most.
+    bounded_position_pass: with gravity, scale a step's pseudo-velocities down where
+        they would lift spheres by more potential energy than the step's solve took
+        out (kinetic energy removed, potential energy released by its moves), so that
+        the solve never raises the total energy of a step; the overlap left is pushed
+        out in later steps (contacts/position_energy.py). Off by default (measured in
+        docs/bench.md, "Settings").
     relaxation: over-relaxation factor omega of the Gauss-Seidel updates, in (0, 2) (1:
         plain projected Gauss-Seidel; 1 < omega < 2 converges faster on stacks; friction
         rows stay plain). Over-relaxed sweeps overshoot: a solve counts as converged
@@ -108,6 +114,7 @@ class Rules:
     relaxation: float = 1.8
     plain_sweeps: int = 10
     position_iterations: int = 60
+    bounded_position_pass: bool = False
     overlap_tolerance: float = 1e-4
     shock_propagation: str = "auto"
     collapse_hits: int = 4
@@ -130,8 +137,10 @@ class Rules:
             raise ValueError(f"tuning relaxation must be in (0, 2), got {self.relaxation!r}")
         _require_at_least(self, ("contact_iterations", "position_iterations"), 1)
         _require_at_least(self, ("plain_sweeps",), 0)
-        if not isinstance(self.substeps, bool):
-            raise ValueError(f"tuning substeps must be True or False, got {self.substeps!r}")
+        for name in ("substeps", "bounded_position_pass"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"tuning {name} must be True or False, "
+                                 f"got {getattr(self, name)!r}")
 
 
 @dataclasses.dataclass(frozen=True)

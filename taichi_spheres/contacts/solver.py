@@ -62,6 +62,7 @@ from .pgs import POSITION, VELOCITY, WARM, GaussSeidel
 from .rows import ContactRows
 from .shock import ShockPropagation, shock_compiled
 from .sweeps import MAX_COLOURS
+from .position_energy import PositionEnergy
 from .warm_energy import WarmStartEnergy
 
 __all__ = ["ContactSolver"]
@@ -70,7 +71,7 @@ __all__ = ["ContactSolver"]
 
 @ti.data_oriented
 class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
-                    WarmStartEnergy, OverlapMeasure):
+                    WarmStartEnergy, PositionEnergy, OverlapMeasure):
     """Contact rows and their projected Gauss–Seidel solve (module docstring).
 
     Fields (K = contacts_per_sphere x capacity rows, M = cells, N = spheres):
@@ -133,6 +134,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         bound = self.rules.bounded_warm_start
         self.bounded_warm_start = self.rules.warm_start and (
             bound == "on" or (bound == "auto" and not features.friction))
+        # position_energy.py: the position pass lifts no more than the step dissipated
+        self.bounded_position_pass = self.rules.bounded_position_pass and features.gravity
         self._allocate(state.capacity, grid.cell_capacity)
         self._build_kernels()
 
@@ -181,6 +184,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.n_colours_f = ti.field(ti.i32, shape=())
         self.tol_len = ti.field(real, shape=())      # position tolerance [m] (bind)
         self._allocate_warm_energy(cap, k)
+        if self.bounded_position_pass:
+            self._allocate_position_energy()
         if self.shock:
             self._allocate_shock()
 
@@ -275,6 +280,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         of its moves), the largest speed and the largest overlap (on the rows, then over
         every pair, wall and object: overlaps.py); keep the impulses for the next step's
         warm start; with Rules.substeps, mark_near (kernel top level)."""
+        if ti.static(self.bounded_position_pass):
+            self.bound_position_pass()
         h = self.params.h[None]
         self.params.vmax2[None] = 0      # measured again: the solve changed velocities
         if ti.static(self.rules.substeps):

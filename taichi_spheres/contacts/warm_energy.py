@@ -78,12 +78,18 @@ class WarmStartEnergy:
         return ti.Vector([lin, quad])
 
     @ti.func
-    def warm_scale(self, chunks):
-        """alpha = min(1, -2 L / Q) from the chunk sums, in order (one thread); 1 if the
-        warm start changed nothing, 0 if it only adds to f. Counts a scaled warm start."""
+    def chunk_total(self, chunks):
+        """The sum of warm_sums[0:chunks], added in order (one thread: fixed bits)."""
         total = ti.Vector.zero(self.real, 2)
         for c in range(chunks):
             total += self.warm_sums[c]
+        return total
+
+    @ti.func
+    def warm_scale(self, chunks):
+        """alpha = min(1, -2 L / Q) from the chunk sums, in order (one thread); 1 if the
+        warm start changed nothing, 0 if it only adds to f. Counts a scaled warm start."""
+        total = self.chunk_total(chunks)
         alpha = ti.cast(1, self.real)
         if total[1] > 0:
             alpha = ti.min(ti.max(-2 * total[0] / total[1], 0), 1)
