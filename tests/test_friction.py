@@ -69,16 +69,10 @@ CLOSED_FORM_RUNS = [("f64", 1.0), ("f64", Tuning().physics.relaxation),
                     ("f32", Tuning().physics.relaxation)]
 
 
-def _needs_f64(arch, precision):
-    if precision == "f64" and arch == "metal":
-        pytest.skip("no f64 on this arch")
-
-
-@pytest.mark.parametrize("precision, relaxation", CLOSED_FORM_RUNS)
+@pytest.mark.parametrize("precision, relaxation", CLOSED_FORM_RUNS, indirect=["precision"])
 def test_sliding_sphere_rolls_at_five_sevenths(arch, precision, relaxation):
     """v0 on the floor with no spin: slides with deceleration mu g until t = 2 v0 / (7 mu
     g), then rolls at 5/7 v0 with omega = v / r (angular momentum about the contact)."""
-    _needs_f64(arch, precision)
     r, mu, v0 = 0.05, 0.3, 1.0
     sc = _one([0.2, 0.5, r], [v0, 0, 0], r, box=((0, 0, 0), (2, 1, 1)), restitution=0.5,
               wall_restitution=0.5, friction=mu)
@@ -99,12 +93,11 @@ def test_sliding_sphere_rolls_at_five_sevenths(arch, precision, relaxation):
         sim.advance(0.2)
 
 
-@pytest.mark.parametrize("precision, relaxation", CLOSED_FORM_RUNS)
+@pytest.mark.parametrize("precision, relaxation", CLOSED_FORM_RUNS, indirect=["precision"])
 @pytest.mark.parametrize("degrees", [20.0, 60.0])
 def test_sphere_on_incline(arch, precision, degrees, relaxation):
     """A sphere released on a plane tilted by theta: rolls with a = 5/7 g sin(theta) when
     tan(theta) <= 7/2 mu, else slides with a = g (sin(theta) - mu cos(theta))."""
-    _needs_f64(arch, precision)
     r, mu = 0.02, 0.3
     th = math.radians(degrees)
     n = np.array([-math.sin(th), 0.0, math.cos(th)])

@@ -35,7 +35,7 @@ __all__ = ["PositionEnergy"]
 @ti.data_oriented
 class PositionEnergy:
     """The bound of the module docstring (a mixin of ContactSolver: uses its state,
-    params, v_pre, w_pre, x_pre, w, serial, f, and WarmStartEnergy's warm_sums and
+    params, x_pre, w, serial, kinetic_spent, and WarmStartEnergy's warm_sums and
     chunk_total)."""
 
     def _allocate_position_energy(self):
@@ -48,16 +48,11 @@ class PositionEnergy:
         budget = ti.cast(0, self.real)
         lift = ti.cast(0, self.real)
         g = self.params.gravity[None]
-        half = ti.cast(0.5, self.real)
         for j in range(WARM_CHUNK):
             i = c * WARM_CHUNK + j
             if i < n:
                 m = self.state.mass_of(i)
-                budget += m * (half * (self.v_pre[i].norm_sqr() - self.state.v[i].norm_sqr())
-                               + g.dot(self.state.x[i] - self.x_pre[i]))
-                if ti.static(self.f.friction):
-                    budget += half / self.state.inv_inertia_of(i) * \
-                        (self.w_pre[i].norm_sqr() - self.state.omega[i].norm_sqr())
+                budget += m * (self.kinetic_spent(i) + g.dot(self.state.x[i] - self.x_pre[i]))
                 lift -= m * h * g.dot(self.w[i])
         return ti.Vector([budget, lift])
 

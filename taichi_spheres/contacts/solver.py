@@ -209,6 +209,17 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         return self.pairs.impact_speed()
 
     @ti.func
+    def kinetic_spent(self, i):
+        """The kinetic energy per unit mass the solve took from sphere i so far, spin
+        included [J/kg]: (|v_pre|^2 - |v|^2) / 2 (+ (|w_pre|^2 - |omega|^2) / (2 m I^-1))."""
+        spent = ti.cast(0.5, self.real) * (self.v_pre[i].norm_sqr() - self.state.v[i].norm_sqr())
+        if ti.static(self.f.friction):     # the spin's kinetic energy too (per unit mass)
+            spent += ti.cast(0.5, self.real) / self.state.mass_of(i) * \
+                (self.w_pre[i].norm_sqr() - self.state.omega[i].norm_sqr()) / \
+                self.state.inv_inertia_of(i)
+        return spent
+
+    @ti.func
     def trapezoidal_move(self, i, h):
         """x_i += h/2 (v_i - v_pre_i) (Moreau-Jean, theta = 1/2), shortened where it
         would raise the sphere's potential energy by more than the solve took from
@@ -216,11 +227,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         move = ti.cast(0.5, self.real) * h * (self.state.v[i] - self.v_pre[i])
         if ti.static(self.f.gravity):
             lift = -self.params.gravity[None].dot(move)
-            spent = ti.cast(0.5, self.real) * (self.v_pre[i].norm_sqr() - self.state.v[i].norm_sqr())
-            if ti.static(self.f.friction):     # the spin's kinetic energy too (per unit mass)
-                spent += ti.cast(0.5, self.real) / self.state.mass_of(i) * \
-                    (self.w_pre[i].norm_sqr() - self.state.omega[i].norm_sqr()) / \
-                    self.state.inv_inertia_of(i)
+            spent = self.kinetic_spent(i)
             if lift > 0 and lift > spent:
                 move *= ti.max(spent, 0) / lift
         self.state.x[i] += move
