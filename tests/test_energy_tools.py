@@ -1,17 +1,20 @@
 """The energy-, overlap- and rate-measuring tools (tools/warm_start_energy.py,
-tools/bed_energy.py, tools/step_overlaps.py, tools/silo_seeds.py): bad options are usage errors before any
-run, and their tables say what was measured. No timings or measured values are
-asserted (the tools are the measurement)."""
+tools/bed_energy.py, tools/step_overlaps.py, tools/silo_seeds.py,
+tools/solver_convergence.py): bad options are usage errors before any run, their
+tables say what was measured, and their arithmetic holds on cases with known answers.
+No timings or measured values are asserted (the tools are the measurement)."""
 import argparse
 import os
 import sys
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
 
 import bed_energy  # noqa: E402  (tools/bed_energy.py)
 import silo_seeds  # noqa: E402  (tools/silo_seeds.py)
+import solver_convergence  # noqa: E402  (tools/solver_convergence.py)
 import settings_tradeoff  # noqa: E402  (tools/settings_tradeoff.py)
 import silo_overlaps  # noqa: E402  (tools/silo_overlaps.py)
 import step_overlaps  # noqa: E402  (tools/step_overlaps.py)
@@ -125,3 +128,25 @@ def test_silo_seeds_variants_and_lammps_are_named_in_the_command():
     assert "2 runs at a time" in text
     assert "| fine | 0.1500 | 0.1500 | 0.1500 | 0.0000 | 0.0000 | 60.0 |" in text
     assert "| LAMMPS | 0.1500 | 0.1400 |" in text
+
+
+def test_solver_convergence_splits_an_error_into_aggregate_means_and_the_rest():
+    """One error per aggregate is carried whole by the aggregates' means; an error that
+    alternates within every aggregate not at all; the random share is aggregates over
+    spheres. Spheres of a bed split into cubes: a uniform error is smooth on every scale,
+    and one sphere's error is all in the top 1 %."""
+    labels = np.repeat(np.arange(4), 5)
+    smooth = np.repeat(np.arange(4.0), 5)[:, None] * np.array([[1.0, 2.0, 0.5]])
+    assert solver_convergence.smooth_share(smooth, labels) == pytest.approx((1.0, 0.2))
+    rough = np.tile([1.0, -1.0], 10)[:, None] * np.ones((1, 3))
+    rough[4::5] = 0.0          # five per aggregate: +1, -1, +1, -1, 0 (mean 0)
+    assert solver_convergence.smooth_share(rough, labels)[0] == pytest.approx(0.0, abs=1e-15)
+    x = np.stack(np.meshgrid(*(np.arange(10.0),) * 3, indexing="ij"), -1).reshape(-1, 3)
+    p = dict(a=np.arange(len(x)), b=np.full(len(x), -1), x=x, d=1.0)
+    truth = np.zeros((len(x), 3))
+    smooth_rows, top = solver_convergence.smoothness(p, truth + 1.0, truth)
+    assert [row[2] for row in smooth_rows] == pytest.approx([1.0] * len(smooth_rows))
+    assert smooth_rows[0][1] == 8.0             # cubes of 2 diameters: 2 x 2 x 2 spheres
+    one = truth.copy()
+    one[17] = 3.0
+    assert dict(solver_convergence.smoothness(p, one, truth)[1])[1] == pytest.approx(1.0)

@@ -28,6 +28,17 @@ Reported per method and amount of work: the largest and the rms sphere velocity 
 against the converged solution [m/s], and the largest error times the step over the
 diameter (how much overlap one step of that error opens).
 
+Then how smooth the error the sweeps leave is (``--smooth-sweeps``, over-relaxation
+1.8 as the defaults): the spheres are grouped into aggregates (cubes of 2, 4 and 8
+diameters, horizontal layers one diameter high, the whole bed), each aggregate's mean
+error is taken, and the share of the error's energy (sum of |e|^2) those means carry
+is reported, with the share a random error of the same size would give (the number
+of aggregates over the number of spheres). A multilevel solver's coarse levels (one
+velocity per aggregate) can correct only that share; where the error is rough on every
+scale, only more fine sweeps reduce it. Last, the share the 1, 10 and 30 % of spheres
+with the largest error carry (how concentrated it is: extra sweeps where the error
+sits could help only a concentrated one).
+
     python tools/solver_convergence.py            # ~2 min
     python tools/solver_convergence.py --write    # into docs/bench.md
 """
@@ -265,9 +276,61 @@ def errors(v, truth, h, d) -> dict:
     return dict(max=float(e.max()), rms=float(np.sqrt(np.mean(e * e))), overlap=float(e.max() * h / d))
 
 
+def smooth_share(err, labels) -> tuple:
+    """(share of sum |err|^2 carried by the aggregates' mean errors, the share a random
+    error would give: the number of aggregates over the number of spheres) for spheres
+    grouped by integer ``labels`` (N,)."""
+    _, inverse, counts = np.unique(labels, return_inverse=True, return_counts=True)
+    means = np.stack([np.bincount(inverse, err[:, ax]) for ax in range(3)], axis=1) / \
+        counts[:, None]
+    carried = float(np.sum(counts[:, None] * means ** 2))
+    return carried / float(np.sum(err ** 2)), len(counts) / len(labels)
+
+
+def smoothness(p, v, truth) -> tuple:
+    """For the error v - truth over the spheres with a row (the bed): rows (aggregate,
+    spheres per aggregate, share carried, random share) of smooth_share over cubes of
+    2, 4 and 8 diameters, layers one diameter high and the whole bed; and rows
+    (percent, share of sum |e|^2) carried by the given percent of spheres with the
+    largest error."""
+    held = np.zeros(len(v), dtype=bool)
+    held[p["a"]] = True
+    held[p["b"][p["b"] >= 0]] = True
+    err, x, d = (v - truth)[held], p["x"][held], p["d"]
+    cube = lambda size: np.floor((x - x.min(axis=0)) / (size * d)).astype(np.int64) @ \
+        np.array([1, 1 << 20, 1 << 40], dtype=np.int64)
+    groups = [(f"cubes of {k} diameters", cube(k)) for k in (2, 4, 8)]
+    groups += [("layers one diameter high", np.floor((x[:, 2] - x[:, 2].min()) / d).astype(np.int64)),
+               ("the whole bed", np.zeros(len(x), dtype=np.int64))]
+    smooth = []
+    for name, labels in groups:
+        share, random = smooth_share(err, labels)
+        smooth.append((name, len(labels) / len(np.unique(labels)), share, random))
+    energy = np.sort(np.sum(err ** 2, axis=1))[::-1]
+    top = [(percent, float(energy[:max(1, round(len(energy) * percent / 100))].sum() /
+                           energy.sum())) for percent in (1, 10, 30)]
+    return smooth, top
+
+
+def smooth_report(sweeps, smooth, top) -> list:
+    lines = ["", f"Smoothness of the error after {sweeps} over-relaxed sweeps (ω 1.8), over "
+             "the spheres with a row: the share of its energy (Σ|e|²) that one mean error "
+             "per aggregate carries.", "",
+             "| aggregates | spheres per aggregate | share carried | share of a random error |",
+             "|---|---|---|---|"]
+    for name, size, share, random in smooth:
+        lines.append(f"| {name} | {size:.1f} | {share:.2f} | {random:.2f} |")
+    lines += ["", "How concentrated it is: the share of Σ|e|² on the spheres with the "
+              "largest error.", "", "| spheres with the largest error | share of Σ|e|² |",
+              "|---|---|"]
+    lines += [f"| {percent} % | {share:.2f} |" for percent, share in top]
+    return lines
+
+
 def report(args, p, res_true, pgs_rows, apgd_rows, check, variant_rows=()) -> str:
     lines = [f"Measured {datetime.date.today()} on {cpu_name()}: "
-             f"`python tools/solver_convergence.py{' --at ' + str(args.at) if args.at != 1.0 else ''}`",
+             f"`python tools/solver_convergence.py{' --at ' + str(args.at) if args.at != 1.0 else ''}"
+             f"{' --smooth-sweeps ' + str(args.smooth_sweeps) if args.smooth_sweeps != 100 else ''}`",
              "",
              f"`scenes/pour.toml` (frictionless, e = 0.5), the velocity problem of the step after "
              f"t = {args.at} s: {len(p['a'])} rows for {len(p['v'])} spheres, step "
@@ -297,6 +360,8 @@ def main(argv=None):
     ap.add_argument("--variant-sweeps", type=int, nargs="+", default=[30, 100, 300],
                     help="sweeps reported for the over-relaxed and reordered variants")
     ap.add_argument("--truth", type=int, default=5000, help="APGD iterations for the converged solution")
+    ap.add_argument("--smooth-sweeps", type=int, default=100,
+                    help="over-relaxed sweeps (1.8) whose error the smoothness table splits")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args(argv)
     ts.runtime.ensure("cpu", "f64", threads=1)
@@ -323,8 +388,11 @@ def main(argv=None):
                       errors(by[k], truth, p["h"], p["d"])) for k in args.variant_sweeps]
     _, kept = apgd(prob, max(args.apgd), keep=set(args.apgd))
     apgd_rows = [(k, (kept[k][1], errors(kept[k][0], truth, p["h"], p["d"]))) for k in args.apgd]
-    publish(report(args, p, res_true, pgs_rows, apgd_rows, check, variant_rows),
-            "solver-convergence", args.write)
+    by = pgs(prob, [args.smooth_sweeps], omega=1.8)
+    text = report(args, p, res_true, pgs_rows, apgd_rows, check, variant_rows)
+    text += "\n" + "\n".join(smooth_report(args.smooth_sweeps,
+                                           *smoothness(p, by[args.smooth_sweeps], truth)))
+    publish(text, "solver-convergence", args.write)
 
 
 if __name__ == "__main__":
