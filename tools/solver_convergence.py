@@ -61,16 +61,21 @@ from taichi_spheres.contacts.pgs import VELOCITY  # noqa: E402
 from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
 
 
-def capture(scene_path: str, at: float) -> dict:
+#: the settings capture() runs with by default: plain sweeps without substeps, as the
+#: numpy sweeps here (pgs) and the figures of docs/bench.md (the contact solver's
+#: former defaults)
+FORMER = dict(relaxation=1.0, substeps=False, position_iterations=100)
+
+
+def capture(scene_path: str, at: float, changes=None) -> dict:
     """The velocity problem of the first step after ``at`` s (numpy arrays), and the
-    engine's velocities after its own sweeps of it."""
+    engine's velocities after its own sweeps of it, with ``Tuning().with_(**changes)``
+    (default FORMER); also its velocity tolerance ``tol`` [m/s]."""
     scene = ts.load_scene(scene_path)
     # the parallel solver path (same bits as the serial one) runs its sweeps from
     # Python, where the problem can be read between the warm start and the sweeps
-    # plain sweeps without substeps, as the numpy sweeps here (pgs) and the figures of
-    # docs/bench.md (the contact solver's former defaults)
-    tuning = Tuning().with_(serial_heavy_below=0, serial_solver_below=0, relaxation=1.0,
-                            substeps=False, position_iterations=100)
+    tuning = Tuning().with_(serial_heavy_below=0, serial_solver_below=0,
+                            **(FORMER if changes is None else changes))
     sim = ts.Simulation(scene, threads=1, tuning=tuning)
     sim.advance_to(at)
     solver = sim._engine.solver
@@ -90,7 +95,8 @@ def capture(scene_path: str, at: float) -> dict:
                            lam=solver.lam.to_numpy()[:n], v=solver.state.v.to_numpy()[:k],
                            x=solver.state.x.to_numpy()[:k],
                            inv_mass=1.0 / np.asarray(scene.mass, dtype=np.float64),
-                           h=float(solver.params.h[None]), sweeps=cap)
+                           h=float(solver.params.h[None]), sweeps=cap,
+                           tol=float(tol[None]))
         done = inner(mode, cap, tol)
         box["rows"]["engine_v"] = solver.state.v.to_numpy()[:k]
         box["rows"]["engine_sweeps"] = done
