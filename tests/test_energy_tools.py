@@ -14,6 +14,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 
 import bed_energy  # noqa: E402  (tools/bed_energy.py)
 import silo_seeds  # noqa: E402  (tools/silo_seeds.py)
+import row_activity  # noqa: E402  (tools/row_activity.py)
 import solver_convergence  # noqa: E402  (tools/solver_convergence.py)
 import settings_tradeoff  # noqa: E402  (tools/settings_tradeoff.py)
 import silo_overlaps  # noqa: E402  (tools/silo_overlaps.py)
@@ -32,6 +33,8 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (settings_tradeoff, ["--variants", "=relaxation=1.8"], "a variant is NAME=FIELD=VALUE"),
     (settings_tradeoff, ["--fills", "-1"], "--fills must be >= 0"),
     (silo_overlaps, ["--first", "0"], "--first must be >= 1"),
+    (row_activity, ["--at", "-1"], "--at times must be >= 0"),
+    (row_activity, ["--threshold", "1"], "--threshold must be in [0, 1)"),
     (silo_overlaps, ["--variants", "=--substeps"], "a variant is NAME=OPTIONS"),
     (silo_overlaps, ["--variants", "fine=--step-fractions 0.05"],
      "variant 'fine': options tools/silo.py does not take"),
@@ -150,3 +153,22 @@ def test_solver_convergence_splits_an_error_into_aggregate_means_and_the_rest():
     one = truth.copy()
     one[17] = 3.0
     assert dict(solver_convergence.smoothness(p, one, truth)[1])[1] == pytest.approx(1.0)
+
+
+def test_row_activity_replay_skips_only_rows_that_would_change_nothing():
+    """Two spheres over the floor: one falling onto it (its row takes an impulse and
+    stays busy), one moving up (its row changes nothing from the first sweep on). Plain
+    sweeps converge in two; the second sweep's update of the free row is the one
+    exactly skippable update, and skipping it gives the same velocities."""
+    from taichi_spheres.config import Rules
+    p = dict(a=np.array([0, 1]), b=np.array([-1, -1]), normal=np.array([[0, 0, 1.0]] * 2),
+             meff=np.array([2.0, 2.0]), target=np.zeros(2), lam=np.zeros(2),
+             v=np.array([[0, 0, -1.0], [0, 0, 1.0]]), inv_mass=np.array([0.5, 0.5]),
+             order=np.array([0, 1]))
+    prob = solver_convergence.Problem(p)
+    rules = Rules(relaxation=1.0)
+    counted = row_activity.replay(prob, rules, 1e-9)
+    skipped = row_activity.replay(prob, rules, 1e-9, "exact")
+    assert (counted["updates"], counted["skipped"], counted["sweeps"]) == (4, 1, 2)
+    assert (skipped["updates"], skipped["skipped"]) == (4, 1)
+    assert counted["v"].tolist() == skipped["v"].tolist() == [[0, 0, 0], [0, 0, 1]]
