@@ -3,7 +3,8 @@
 Each object takes ``restitution=None, friction=None`` (None: the scene's wall values,
 filled in by :meth:`Scene.from_arrays`). Gaps are distances between a sphere's surface
 and the object's [m], negative when the sphere is inside it; the engine's kernels
-(surfaces.py) compute the same.
+(surfaces.py) compute the same, except on the far side of a finite cone or cylinder
+(below).
 
 - :class:`Plane` ``(point, normal, hole=None)``: the solid is the half-space
   ``(x - point).n < 0`` (n = normal / |normal|); with ``hole = R_h`` a cylindrical
@@ -17,9 +18,13 @@ and the object's [m], negative when the sphere is inside it; the engine's kernel
   plane (t along the axis, rho from it) the segment (0, radius_at_point) - (length,
   radius_at_end). The gap is the signed distance to it minus r (positive on the axis
   side for ``inside``, on the far side otherwise) where the centre projects onto the
-  segment, else the distance to the nearer end rim minus r (a hopper's outlet edge).
+  segment, else the distance to the nearer end rim minus r (a hopper's outlet edge):
+  spheres must start on the open side. In the run a finite cone is a shell with two
+  faces: a sphere that goes round its open end to the far side meets its outer face
+  (surfaces.py).
 - :class:`Cylinder` ``(point, axis, radius, length=None, inside=True)``: a cone with
-  both radii equal; ``length=None`` is infinite (no rims).
+  both radii equal; ``length=None`` is infinite (no rims, and its far side stays
+  solid in the run).
 - :class:`Sink` ``(low, high, recycle=False)``: a box region; a sphere whose centre is
   in [low, high) leaves the simulation (or, with ``recycle``, re-enters at the top of
   the box at rest in a free spot).

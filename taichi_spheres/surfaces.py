@@ -9,9 +9,16 @@ Gap and normal of a sphere (centre x, radius r) to an object, as in geometry.py:
   (z >= 0) or R_h - rho - r below the plane (the orifice's wall);
 - cone (point p, unit axis a, radii R_0 at p and R_1 at length L; a cylinder has
   R_0 = R_1, and L < 0 for an infinite one): in the meridian plane (t along a, rho
-  from the axis) the surface is the segment (0, R_0)-(L, R_1); the gap is the signed
-  distance to it minus r (positive on the inside for ``inside``, on the outside
-  otherwise), or the distance to the nearer end rim minus r beyond the segment.
+  from the axis) the surface is the segment (0, R_0)-(L, R_1); the gap is the
+  distance to it minus r, or the distance to the nearer end rim minus r beyond the
+  segment. A finite cone or cylinder is a shell with two faces: a sphere that went
+  round an open end (out of a hopper's outlet, then up against its outside) meets
+  the outer face, with the normal towards it (had the far side been solid, the gap
+  would jump from the rim distance to minus the distance to the surface where the
+  centre starts to project onto the segment, and the sphere would be pushed through
+  the shell). An infinite cylinder keeps its solid side (the outside for
+  ``inside``); so does geometry.py's numpy gap, with which a scene's spheres are
+  checked to start on the open side.
 The normal points from the surface to the sphere's centre.
 
 Impacts (exact rewind, as for the walls and pairs): a sphere that ends a step past a
@@ -111,7 +118,11 @@ class Surfaces:
         gap = ti.cast(0, self.real)
         n2 = ti.Vector([seg[1], -seg[0]]) / span * sign     # towards the open side
         if length < 0 or (along > 0 and along < 1):
-            gap = (ti.Vector([t, rho - r0])).dot(n2) - r
+            side = (ti.Vector([t, rho - r0])).dot(n2)
+            if length >= 0 and side < 0:    # the far side of a finite shell: its outer face
+                side = -side
+                n2 = -n2
+            gap = side - r
         else:
             end = ti.Vector([ti.cast(0, self.real), r0])
             if along >= 1:

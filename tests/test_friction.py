@@ -266,6 +266,44 @@ def test_silo_holds_without_orifice_and_discharges_through_it(arch):
     assert abs(budget["unaccounted"]) < 1e-6 * abs(budget["initial"])
 
 
+def _funnel(x, r, point=(0.15, 0.15, 0.2), r0=0.018, r1=0.05, length=0.08):
+    """(gap [m], inside) of sphere surfaces at x (N, 3), radii r, and the funnel of
+    test_a_sphere_below_a_funnel_meets_its_outer_face (a cone along z): the distance
+    to either face, or to a rim beyond the ends, minus r; inside: the centre is on the
+    axis side of the cone where it projects onto it."""
+    d = np.atleast_2d(x) - np.asarray(point)
+    t, rho = d[:, 2], np.hypot(d[:, 0], d[:, 1])
+    seg = np.array([length, r1 - r0])
+    along = (t * seg[0] + (rho - r0) * seg[1]) / (seg @ seg)
+    axis_side = (t * seg[1] - (rho - r0) * seg[0]) > 0
+    a = np.clip(along, 0.0, 1.0)
+    gap = np.hypot(t - a * seg[0], rho - r0 - a * seg[1]) - r
+    return gap, axis_side & (along > 0) & (along < 1)
+
+
+def test_a_sphere_below_a_funnel_meets_its_outer_face(arch):
+    """A finite cone is a shell with two faces: a sphere below a funnel's outlet and
+    outside its rim, thrown up against the funnel's outside, bounces off the outer face
+    and never gets into the funnel (had the far side been solid, the gap would jump
+    from the rim distance to minus the distance to the surface where the sphere starts
+    to project onto the cone, and the sphere was pushed through the shell: 23 mm in
+    one step)."""
+    r = 0.003
+    scene = ts.Scene.from_arrays(
+        np.array([[0.185, 0.15, 0.19]]), np.array([[0.0, 0.0, 1.2]]), r,
+        box=((0, 0, 0), (0.3, 0.3, 0.4)), restitution=0.5, wall_restitution=0.5,
+        geometry=[ts.Cone((0.15, 0.15, 0.2), (0, 0, 1), 0.018, 0.05, 0.08)])
+    sim = ts.Simulation(scene, arch=arch, precision="f64")
+    closest, entered = np.inf, False
+    while sim.time < 0.15:
+        sim.advance(sim.max_step())
+        gap, inside = _funnel(sim.state().x, r)
+        closest, entered = min(closest, float(gap[0])), entered or bool(inside[0])
+    assert sim.stats["wall_collisions"] >= 1            # it met the cone's outer face
+    assert not entered and closest > -1e-4 * 2 * r
+    assert sim.state().v[0, 0] > 0                      # sent outwards by the outer face
+
+
 def test_recycled_spheres_reenter_at_the_top(arch):
     """With recycle the sphere count stays; discharged spheres re-enter at rest in free
     spots at the top of the box."""
