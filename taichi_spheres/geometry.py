@@ -3,8 +3,7 @@
 Each object takes ``restitution=None, friction=None`` (None: the scene's wall values,
 filled in by :meth:`Scene.from_arrays`). Gaps are distances between a sphere's surface
 and the object's [m], negative when the sphere is inside it; the engine's kernels
-(surfaces.py) compute the same, except on the far side of a finite cone or cylinder
-(below).
+(surfaces.py) compute the same, except behind a finite cone or cylinder (below).
 
 - :class:`Plane` ``(point, normal, hole=None)``: the solid is the half-space
   ``(x - point).n < 0`` (n = normal / |normal|); with ``hole = R_h`` a cylindrical
@@ -19,12 +18,12 @@ and the object's [m], negative when the sphere is inside it; the engine's kernel
   radius_at_end). The gap is the signed distance to it minus r (positive on the axis
   side for ``inside``, on the far side otherwise) where the centre projects onto the
   segment, else the distance to the nearer end rim minus r (a hopper's outlet edge):
-  spheres must start on the open side. In the run a finite cone is a shell with two
-  faces: a sphere that goes round its open end to the far side meets its outer face
-  (surfaces.py).
+  spheres must start on the front side this gap measures. In the run a finite cone
+  is a shell with two faces: a sphere that goes round an open end to its back meets
+  the back face (surfaces.py).
 - :class:`Cylinder` ``(point, axis, radius, length=None, inside=True)``: a cone with
-  both radii equal; ``length=None`` is infinite (no rims, and its far side stays
-  solid in the run).
+  both radii equal; ``length=None`` is infinite (no rims, and its back stays solid in
+  the run); a finite one with ``inside=False`` is an open tube in the run.
 - :class:`Sink` ``(low, high, recycle=False)``: a box region; a sphere whose centre is
   in [low, high) leaves the simulation (or, with ``recycle``, re-enters at the top of
   the box at rest in a free spot).

@@ -11,14 +11,16 @@ Gap and normal of a sphere (centre x, radius r) to an object, as in geometry.py:
   R_0 = R_1, and L < 0 for an infinite one): in the meridian plane (t along a, rho
   from the axis) the surface is the segment (0, R_0)-(L, R_1); the gap is the
   distance to it minus r, or the distance to the nearer end rim minus r beyond the
-  segment. A finite cone or cylinder is a shell with two faces: a sphere that went
-  round an open end (out of a hopper's outlet, then up against its outside) meets
-  the outer face, with the normal towards it (had the far side been solid, the gap
-  would jump from the rim distance to minus the distance to the surface where the
-  centre starts to project onto the segment, and the sphere would be pushed through
-  the shell). An infinite cylinder keeps its solid side (the outside for
-  ``inside``); so does geometry.py's numpy gap, with which a scene's spheres are
-  checked to start on the open side.
+  segment. A finite cone or cylinder is a shell with two faces, the one on the side
+  of the sphere's centre: a sphere that went round an open end (out of a hopper's
+  outlet, then up against its outside; under a platform cone) meets the back face,
+  with the normal towards it (had the back been solid, the gap would jump from the
+  rim distance to minus the distance to the surface where the centre starts to
+  project onto the segment, and the sphere would be pushed through the shell). A
+  sphere pressed more than r through a face therefore comes out on the back. An
+  infinite cylinder keeps its solid back (the outside for ``inside``); so does
+  geometry.py's numpy gap, with which a scene's spheres are checked to start on the
+  front (``inside``) side.
 The normal points from the surface to the sphere's centre.
 
 Impacts (exact rewind, as for the walls and pairs): a sphere that ends a step past a
@@ -119,7 +121,7 @@ class Surfaces:
         n2 = ti.Vector([seg[1], -seg[0]]) / span * sign     # towards the open side
         if length < 0 or (along > 0 and along < 1):
             side = (ti.Vector([t, rho - r0])).dot(n2)
-            if length >= 0 and side < 0:    # the far side of a finite shell: its outer face
+            if length >= 0 and side < 0:    # behind a finite shell: its back face
                 side = -side
                 n2 = -n2
             gap = side - r

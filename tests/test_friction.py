@@ -266,42 +266,60 @@ def test_silo_holds_without_orifice_and_discharges_through_it(arch):
     assert abs(budget["unaccounted"]) < 1e-6 * abs(budget["initial"])
 
 
-def _funnel(x, r, point=(0.15, 0.15, 0.2), r0=0.018, r1=0.05, length=0.08):
-    """(gap [m], inside) of sphere surfaces at x (N, 3), radii r, and the funnel of
-    test_a_sphere_below_a_funnel_meets_its_outer_face (a cone along z): the distance
-    to either face, or to a rim beyond the ends, minus r; inside: the centre is on the
-    axis side of the cone where it projects onto it."""
+def _shell(x, r, point, r0, r1, length):
+    """(gap [m], side) of sphere surfaces at x (N, 3), radii r (N,), and a finite cone
+    along z from ``point`` (radius r0 there, r1 at ``length`` above): the distance to
+    either face, or to a rim beyond the ends, minus r; side: +1 or -1 for the side of
+    the cone's surface the centre is on where it projects onto it (axis side: +1),
+    0 beyond the ends."""
     d = np.atleast_2d(x) - np.asarray(point)
     t, rho = d[:, 2], np.hypot(d[:, 0], d[:, 1])
     seg = np.array([length, r1 - r0])
     along = (t * seg[0] + (rho - r0) * seg[1]) / (seg @ seg)
-    axis_side = (t * seg[1] - (rho - r0) * seg[0]) > 0
     a = np.clip(along, 0.0, 1.0)
     gap = np.hypot(t - a * seg[0], rho - r0 - a * seg[1]) - r
-    return gap, axis_side & (along > 0) & (along < 1)
+    side = np.sign(t * seg[1] - (rho - r0) * seg[0]) * ((along > 0) & (along < 1))
+    return gap, side
 
 
-def test_a_sphere_below_a_funnel_meets_its_outer_face(arch):
-    """A finite cone is a shell with two faces: a sphere below a funnel's outlet and
-    outside its rim, thrown up against the funnel's outside, bounces off the outer face
-    and never gets into the funnel (had the far side been solid, the gap would jump
-    from the rim distance to minus the distance to the surface where the sphere starts
-    to project onto the cone, and the sphere was pushed through the shell: 23 mm in
-    one step)."""
+#: (cone (point, r0, r1, length), inside, start [m] and velocity [m/s] of the sphere,
+#: the side of the shell (_shell) behind it, the direction the back face sends it): a
+#: funnel's outlet with a sphere below it and outside its rim, thrown up; a flat
+#: platform cone (scenes/heap.toml's) with a sphere beside it and below, thrown in
+#: under it and up (spheres start in front of a face)
+SHELLS = {
+    "funnel's outside": (((0.15, 0.15, 0.2), 0.018, 0.05, 0.08), True,
+                         (0.185, 0.15, 0.19), (0, 0, 1.2), -1, (1, 0, 0)),
+    "platform's underside": (((0.15, 0.15, 0.139), 0.06, 0.0, 0.001), False,
+                             (0.22, 0.15, 0.125), (-0.6, 0, 0.5), 1, (0, 0, -1)),
+}
+
+
+@pytest.mark.parametrize("case", SHELLS)
+def test_a_sphere_behind_a_finite_cone_meets_its_back_face(arch, case):
+    """A finite cone is a shell with two faces: a sphere that gets behind it (below a
+    funnel's outlet and outside its rim; under a platform cone), thrown against it,
+    bounces off the back face and never crosses the shell (had the back been solid,
+    the gap would jump from the rim distance to minus the distance to the surface
+    where the sphere starts to project onto the cone, and the sphere was pushed
+    through the shell in one step)."""
+    (point, r0, r1, length), inside, start, v0, behind, kick = SHELLS[case]
     r = 0.003
     scene = ts.Scene.from_arrays(
-        np.array([[0.185, 0.15, 0.19]]), np.array([[0.0, 0.0, 1.2]]), r,
+        np.array([start]), np.array([v0], dtype=float), r,
         box=((0, 0, 0), (0.3, 0.3, 0.4)), restitution=0.5, wall_restitution=0.5,
-        geometry=[ts.Cone((0.15, 0.15, 0.2), (0, 0, 1), 0.018, 0.05, 0.08)])
+        geometry=[ts.Cone(point, (0, 0, 1), r0, r1, length, inside=inside)])
     sim = ts.Simulation(scene, arch=arch, precision="f64")
-    closest, entered = np.inf, False
+    closest, sides = np.inf, set()
     while sim.time < 0.15:
         sim.advance(sim.max_step())
-        gap, inside = _funnel(sim.state().x, r)
-        closest, entered = min(closest, float(gap[0])), entered or bool(inside[0])
-    assert sim.stats["wall_collisions"] >= 1            # it met the cone's outer face
-    assert not entered and closest > -1e-4 * 2 * r
-    assert sim.state().v[0, 0] > 0                      # sent outwards by the outer face
+        gap, side = _shell(sim.state().x, r, point, r0, r1, length)
+        closest = min(closest, float(gap[0]))
+        sides.add(int(side[0]))
+    assert sim.stats["wall_collisions"] >= 1            # it met the back face
+    assert sides - {0} == {behind}                      # and stayed behind the shell
+    assert closest > -1e-4 * 2 * r
+    assert float(np.dot(sim.state().v[0], kick)) > 0    # sent back by the back face
 
 
 def test_recycled_spheres_reenter_at_the_top(arch):
