@@ -35,6 +35,8 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (silo_overlaps, ["--first", "0"], "--first must be >= 1"),
     (row_activity, ["--at", "-1"], "--at times must be >= 0"),
     (row_activity, ["--threshold", "1"], "--threshold must be in [0, 1)"),
+    (row_activity, ["--scene", os.path.join(os.path.dirname(__file__), "..", "scenes",
+                                            "heap.toml")], "the replay has no friction rows"),
     (silo_overlaps, ["--variants", "=--substeps"], "a variant is NAME=OPTIONS"),
     (silo_overlaps, ["--variants", "fine=--step-fractions 0.05"],
      "variant 'fine': options tools/silo.py does not take"),

@@ -34,6 +34,7 @@ a scheme pays only where it skips a large share.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import os
 import sys
@@ -55,7 +56,8 @@ TIMES = [0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0, 1.5]
 
 def replay(prob: Problem, rules: Rules, tol: float, skip: str = "none",
            threshold: float = 0.0) -> dict:
-    """The engine's velocity solve of the captured problem in numpy. ``skip``: "none"
+    """The engine's velocity solve of the captured problem in numpy (Rules: the
+    capture's; tol: its velocity tolerance [m/s]). ``skip``: "none"
     (count the exactly skippable updates, skip nothing), "exact" (skip them) or
     "threshold" (skip rows whose last change was at most threshold x tol while no
     larger change touched their spheres). Returns the updates run, the skippable or
@@ -124,7 +126,8 @@ def measure(scene: str, at: float, threshold: float) -> dict:
     """Capture the step after ``at`` s at the defaults and replay its velocity solve
     three ways (module docstring)."""
     p = capture(scene, at, changes={})
-    prob, rules = Problem(p), Rules()
+    # the defaults the capture ran with, at the cap it was given
+    prob, rules = Problem(p), dataclasses.replace(Rules(), contact_iterations=p["sweeps"])
     plain = replay(prob, rules, p["tol"])
     exact = replay(prob, rules, p["tol"], "exact")
     rough = replay(prob, rules, p["tol"], "threshold", threshold)
@@ -176,6 +179,8 @@ def main(argv=None):
         ap.error("--at times must be >= 0")
     if not 0 <= args.threshold < 1:
         ap.error("--threshold must be in [0, 1)")
+    if ts.load_scene(args.scene).frictional:
+        ap.error("the replay has no friction rows: give a frictionless scene")
     ts.runtime.ensure("cpu", "f64", threads=1)
     rows = [(t, measure(args.scene, t, args.threshold)) for t in args.at]
     publish(report(args, rows), "row-activity", args.write)

@@ -284,8 +284,8 @@ def errors(v, truth, h, d) -> dict:
 
 def smooth_share(err, labels) -> tuple:
     """(share of sum |err|^2 carried by the aggregates' mean errors, the share a random
-    error would give: the number of aggregates over the number of spheres) for spheres
-    grouped by integer ``labels`` (N,)."""
+    error would give: the number of aggregates over the number of spheres) for the
+    sphere velocity errors err (N, 3) [m/s] grouped by integer ``labels`` (N,)."""
     _, inverse, counts = np.unique(labels, return_inverse=True, return_counts=True)
     means = np.stack([np.bincount(inverse, err[:, ax]) for ax in range(3)], axis=1) / \
         counts[:, None]
@@ -294,18 +294,16 @@ def smooth_share(err, labels) -> tuple:
 
 
 def smoothness(p, v, truth) -> tuple:
-    """For the error v - truth over the spheres with a row (the bed): rows (aggregate,
-    spheres per aggregate, share carried, random share) of smooth_share over cubes of
-    2, 4 and 8 diameters, layers one diameter high and the whole bed; and rows
-    (percent, share of sum |e|^2) carried by the given percent of spheres with the
-    largest error."""
+    """For the error v - truth (velocities (N, 3) [m/s]) over the spheres with a row
+    (the bed): rows (aggregate, spheres per aggregate, share carried, random share) of
+    smooth_share over cubes of 2, 4 and 8 diameters, layers one diameter high and the
+    whole bed; and rows (percent, share of sum |e|^2) carried by the given percent of
+    spheres with the largest error."""
     held = np.zeros(len(v), dtype=bool)
     held[p["a"]] = True
     held[p["b"][p["b"] >= 0]] = True
     err, x, d = (v - truth)[held], p["x"][held], p["d"]
-    cube = lambda size: np.floor((x - x.min(axis=0)) / (size * d)).astype(np.int64) @ \
-        np.array([1, 1 << 20, 1 << 40], dtype=np.int64)
-    groups = [(f"cubes of {k} diameters", cube(k)) for k in (2, 4, 8)]
+    groups = [(f"cubes of {k} diameters", cube_labels(x, k * d)) for k in (2, 4, 8)]
     groups += [("layers one diameter high", np.floor((x[:, 2] - x[:, 2].min()) / d).astype(np.int64)),
                ("the whole bed", np.zeros(len(x), dtype=np.int64))]
     smooth = []
@@ -318,7 +316,16 @@ def smoothness(p, v, truth) -> tuple:
     return smooth, top
 
 
+def cube_labels(x, size) -> np.ndarray:
+    """(N,) int64 label of the cube of side ``size`` [m] holding each centre of x (N, 3)
+    [m], cubes counted from the lowest corner of x."""
+    cell = np.floor((x - x.min(axis=0)) / size).astype(np.int64)
+    return cell @ np.array([1, 1 << 20, 1 << 40], dtype=np.int64)
+
+
 def smooth_report(sweeps, smooth, top) -> list:
+    """The markdown lines of the smoothness and concentration tables (smoothness's
+    rows) for the error after ``sweeps`` over-relaxed sweeps."""
     lines = ["", f"Smoothness of the error after {sweeps} over-relaxed sweeps (ω 1.8), over "
              "the spheres with a row: the share of its energy (Σ|e|²) that one mean error "
              "per aggregate carries.", "",
