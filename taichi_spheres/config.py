@@ -60,7 +60,8 @@ class Rules:
         they would lift spheres by more potential energy than the step's solve took
         out (kinetic energy removed, potential energy released by its moves), so that
         the solve never raises the total energy of a step; the overlap left is pushed
-        out in later steps (contacts/position_energy.py). Off by default (measured in
+        out as later steps' solves take energy out, so an overlap a resting scene
+        starts with stays (contacts/position_energy.py). Off by default (measured in
         docs/bench.md, "Settings").
     relaxation: over-relaxation factor omega of the Gauss-Seidel updates, in (0, 2) (1:
         plain projected Gauss-Seidel; 1 < omega < 2 converges faster on stacks; friction

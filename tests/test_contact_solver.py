@@ -463,6 +463,20 @@ def test_bounded_position_pass_never_raises_the_energy_of_a_step(arch):
     assert np.diff(e).max() <= 1e-12 * abs(e).max()
 
 
+def test_bounded_position_pass_keeps_the_overlaps_a_resting_scene_starts_with(arch):
+    """The bound's other side: the column of the overlap-recovery test, pressed 5 % into
+    itself at rest, has no energy a solve takes out, so with Rules.bounded_position_pass
+    its overlaps stay (without it they are gone: the test above) and nothing moves."""
+    scene = _column(10)
+    sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(bounded_position_pass=True))
+    x = scene.x.copy()
+    x[:, 2] = 0.95 * R + 0.95 * 2 * R * np.arange(10)
+    sim.set_state(x, np.zeros_like(x))
+    sim.advance(0.2)
+    assert brute_overlap(sim.state(), scene) == pytest.approx(0.05, rel=1e-3)
+    assert np.abs(sim.state().x - x).max() <= 1e-6 * R
+
+
 @pytest.mark.parametrize("bounded, substeps", [("auto", False), ("off", False),
                                                ("auto", True)])
 def test_bounded_warm_start_adds_no_energy_after_a_heavy_impact(arch, bounded, substeps):
