@@ -48,7 +48,7 @@ sys.path.insert(0, HERE)
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import Rules  # noqa: E402
 from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
-from solver_convergence import Problem, capture  # noqa: E402
+from solver_convergence import Problem, capture, update_row  # noqa: E402
 
 #: --at default: through the fall (impacts on a growing bed) and in the bed
 TIMES = [0.2, 0.3, 0.4, 0.5, 0.6, 0.8, 1.0, 1.5]
@@ -84,7 +84,8 @@ def replay(prob: Problem, rules: Rules, tol: float, skip: str = "none",
                 skipped += 1
                 if skip != "none":
                     continue
-            change = abs(update(s, ai, bi, n[s], meff[s], tgt[s], omega, lam, vl, im)) / meff[s]
+            change = abs(update_row(s, ai, bi, n[s], meff[s], tgt[s], omega, lam, vl,
+                                    im)) / meff[s]
             residual = max(residual, change)
             if change > small:
                 stamp[ai] = clock
@@ -98,28 +99,6 @@ def replay(prob: Problem, rules: Rules, tol: float, skip: str = "none",
                 break
             relaxed = False
     return dict(updates=updates, skipped=skipped, sweeps=it, v=np.array(vl))
-
-
-def update(s, ai, bi, ns, meff, tgt, omega, lam, vl, im) -> float:
-    """contacts/pgs.py's update of row s on the lists lam and vl; returns Δλ."""
-    va = vl[ai]
-    if bi >= 0:         # (the engine's order of operations: the same bits)
-        vb = vl[bi]
-        un = (va[0] - vb[0]) * ns[0] + (va[1] - vb[1]) * ns[1] + (va[2] - vb[2]) * ns[2]
-    else:
-        un = va[0] * ns[0] + va[1] * ns[1] + va[2] * ns[2]
-    old = lam[s]
-    new = max(old + omega * meff * (tgt - un), 0.0)
-    lam[s] = new
-    dl = new - old
-    if dl != 0.0:
-        ca = dl * im[ai]
-        vl[ai] = [va[0] + ca * ns[0], va[1] + ca * ns[1], va[2] + ca * ns[2]]
-        if bi >= 0:
-            cb = dl * im[bi]
-            vb = vl[bi]
-            vl[bi] = [vb[0] - cb * ns[0], vb[1] - cb * ns[1], vb[2] - cb * ns[2]]
-    return dl
 
 
 def measure(scene: str, at: float, threshold: float) -> dict:

@@ -160,23 +160,31 @@ def sweep_rows(prob: Problem, lam_l: list, vl: list, order, omega: float = 1.0) 
     a, b, n, meff, tgt = prob.lists
     im = prob.im
     for s in order:
-        ai, bi, ns = a[s], b[s], n[s]
-        va = vl[ai]
-        if bi >= 0:
-            vb = vl[bi]
-            un = (va[0] - vb[0]) * ns[0] + (va[1] - vb[1]) * ns[1] + (va[2] - vb[2]) * ns[2]
-        else:
-            un = va[0] * ns[0] + va[1] * ns[1] + va[2] * ns[2]
-        old = lam_l[s]
-        new = max(old + omega * meff[s] * (tgt[s] - un), 0.0)
-        lam_l[s] = new
-        dl = new - old
-        ca = dl * im[ai]
-        vl[ai] = [va[0] + ca * ns[0], va[1] + ca * ns[1], va[2] + ca * ns[2]]
-        if bi >= 0:
-            cb = dl * im[bi]
-            vb = vl[bi]
-            vl[bi] = [vb[0] - cb * ns[0], vb[1] - cb * ns[1], vb[2] - cb * ns[2]]
+        update_row(s, a[s], b[s], n[s], meff[s], tgt[s], omega, lam_l, vl, im)
+
+
+def update_row(s, ai, bi, ns, meff, tgt, omega, lam, vl, im) -> float:
+    """contacts/pgs.py's update of row s (spheres ai, bi < 0 a wall; normal ns, effective
+    mass meff [kg], target tgt [m/s]) in place on the impulses lam [N s] and sphere
+    velocities vl [m/s] (Python lists), the engine's order of operations (the same
+    bits); im: inverse masses [1/kg]. Returns the impulse change [N s]."""
+    va = vl[ai]
+    if bi >= 0:
+        vb = vl[bi]
+        un = (va[0] - vb[0]) * ns[0] + (va[1] - vb[1]) * ns[1] + (va[2] - vb[2]) * ns[2]
+    else:
+        un = va[0] * ns[0] + va[1] * ns[1] + va[2] * ns[2]
+    old = lam[s]
+    new = max(old + omega * meff * (tgt - un), 0.0)
+    lam[s] = new
+    dl = new - old
+    ca = dl * im[ai]
+    vl[ai] = [va[0] + ca * ns[0], va[1] + ca * ns[1], va[2] + ca * ns[2]]
+    if bi >= 0:
+        cb = dl * im[bi]
+        vb = vl[bi]
+        vl[bi] = [vb[0] - cb * ns[0], vb[1] - cb * ns[1], vb[2] - cb * ns[2]]
+    return dl
 
 
 def pgs(prob: Problem, sweeps: list[int], omega: float = 1.0, orders=None) -> dict:
