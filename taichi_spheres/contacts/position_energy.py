@@ -19,8 +19,7 @@ the kinetic energy the sweeps removed and the potential energy the moves release
 where lift > max(budget, 0), every w is scaled by max(budget, 0) / lift, and the
 overlap left is pushed out as later steps' solves take energy out (an overlap a
 resting scene starts with has no energy to be lifted by, and stays). The solve then
-never raises the total
-energy of a step.
+never raises the total energy of a step.
 
 Both sums are taken in fixed chunks of WARM_CHUNK spheres (the warm start's chunk sums,
 whose storage they reuse), the chunk sums in order by one thread: the same bits for any
