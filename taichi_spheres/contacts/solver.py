@@ -296,14 +296,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.state.n_spheres[None]):
             self.state.x[i] += h * self.w[i]
-            move = self.state.x[i] - self.x_pre[i]
-            loss = ti.cast(0.5, self.real) * (self.v_pre[i].norm_sqr() - self.state.v[i].norm_sqr())
+            loss = self.kinetic_spent(i)
             if ti.static(self.f.gravity):
-                loss += self.params.gravity[None].dot(move)
-            if ti.static(self.f.friction):
-                loss += ti.cast(0.5, self.real) / self.state.mass_of(i) * \
-                    (self.w_pre[i].norm_sqr() - self.state.omega[i].norm_sqr()) / \
-                    self.state.inv_inertia_of(i)
+                loss += self.params.gravity[None].dot(self.state.x[i] - self.x_pre[i])
             if loss != 0:
                 ti.atomic_add(self.params.energy_contacts[None], self.state.mass_of(i) * loss)
             ti.atomic_max(self.params.vmax2[None], self.state.v[i].norm_sqr())
