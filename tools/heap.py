@@ -10,10 +10,19 @@ half of it), and measures the angle from the heap's surface profile: around the
 platform's axis, the top z + r of the highest sphere on the platform in radial bins
 one diameter wide; a straight line fitted to that profile between 20 % and 80 % of the
 heap's height above the platform (no cap, no toe) gives the slope, and the angle of
-repose is atan(-slope).
+repose is atan(-slope). The fixed-base angle (the classic measure on a platform of
+radius R) is atan((H - d) / R): H the heap's height above the platform, d the largest
+diameter (the top of a sphere resting at the platform's edge): the mean slope from the
+top to the edge, defined also where the profile has fewer than three bins between 20 %
+and 80 % of the height (a flat-topped deposit, where it is no angle of repose).
+
+With ``--seeds``, each (mu, mu_r) is poured once per seed (every [[pour]] table of the
+scene draws its positions and velocities from that seed), and the report adds the mean
+and the standard deviation over the pours.
 
     python tools/heap.py                               # mu in 0.3 0.5 0.7, mu_r in 0 0.1
     python tools/heap.py --mu 0.5 --mu-r 0.1 --no-write
+    python tools/heap.py --mu 0.3 0.6 --mu-r 0.1 --seeds 7 8 9
     python tools/heap.py --write                       # the 'heap' section of docs/granular.md
 """
 from __future__ import annotations
@@ -24,6 +33,7 @@ import math
 import os
 import sys
 import time
+import tomllib
 
 import numpy as np
 
@@ -33,9 +43,29 @@ sys.path.insert(0, os.path.dirname(__file__))
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import DEFAULT  # noqa: E402
 from taichi_spheres.geometry import with_material  # noqa: E402
+from taichi_spheres.scenefile import scene_from_dict  # noqa: E402
 from machine import cpu_name, write_section  # noqa: E402  (tools/machine.py)
 
 DOCS = os.path.join(os.path.dirname(__file__), "..", "docs")
+
+
+def heap_scene(path, seed=None):
+    """The scene of the file at path; with seed (an int), its k-th [[pour]] table draws
+    from seed + k instead of its own seed."""
+    with open(path, "rb") as fh:
+        data = tomllib.load(fh)
+    if seed is not None:
+        for k, pour in enumerate(data.get("pour", [])):
+            pour["seed"] = int(seed) + k
+    return scene_from_dict(data, source=str(path))
+
+
+def fixed_base_angle(height, base_radius, diameter) -> float:
+    """Fixed-base angle of repose [deg] of a heap ``height`` [m] high (its top sphere's top
+    above the platform) on a platform of radius ``base_radius`` [m]: atan((height -
+    diameter) / base_radius), diameter [m] the height of a sphere resting at the edge;
+    0 for a single layer."""
+    return math.degrees(math.atan(max(height - diameter, 0.0) / base_radius))
 
 
 def surface_profile(x, radius, centre, bin_width) -> tuple:
@@ -73,6 +103,43 @@ def repose_angle(x, radius, floor=0.0, below=math.inf, centre=None, within=math.
     return float(math.degrees(math.atan(-slope))), float(top), int(use.sum())
 
 
+def base_angle(base, height, radius) -> float:
+    """fixed_base_angle of a heap ``height`` [m] high on the base of repose_angle's
+    keywords ``base`` (its ``within`` the platform's radius; nan without one)."""
+    within = base.get("within", math.inf)
+    if not math.isfinite(within):
+        return math.nan
+    return fixed_base_angle(height, within, 2 * float(np.max(radius)))
+
+
+def summarise(rows, keys=("mu", "mu_r")) -> list:
+    """One dict per distinct ``keys`` of rows: the keys, pours n, and the mean and
+    standard deviation (ddof 1; nan for one pour) of angle (over the pours the profile
+    fit measured: fits), base_angle and height."""
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault(tuple(r[k] for k in keys), []).append(r)
+    out = []
+    for key, group in groups.items():
+        s = dict(zip(keys, key), n=len(group))
+        for name in ("angle", "base_angle", "height"):
+            v = np.array([r[name] for r in group], float)
+            v = v[np.isfinite(v)]
+            s[name] = float(v.mean()) if v.size else math.nan
+            s[name + "_sd"] = float(v.std(ddof=1)) if v.size > 1 else math.nan
+            if name == "angle":
+                s["fits"] = int(v.size)
+        out.append(s)
+    return out
+
+
+def mean_sd(value, sd, scale=1.0, digits=1) -> str:
+    """'value ± sd' (scaled) for a report; just the value where sd is nan."""
+    if not math.isfinite(sd):
+        return f"{scale * value:.{digits}f}"
+    return f"{scale * value:.{digits}f} ± {scale * sd:.{digits}f}"
+
+
 def run_heap(scene, mu, mu_r, duration, rest, threads, base, options=None) -> dict:
     """Simulate the heap scene with friction mu and rolling friction mu_r; returns the
     angle, heap height, time, wall seconds and the largest overlap. options:
@@ -95,24 +162,40 @@ def run_heap(scene, mu, mu_r, duration, rest, threads, base, options=None) -> di
     st = sim.state()
     angle, height, samples = repose_angle(st.x, st.radius, **base)
     return dict(mu=mu, mu_r=mu_r, angle=angle, height=height, samples=samples,
+                base_angle=base_angle(base, height, st.radius),
                 options=options, time=sim.time,
                 sweeps=sim.stats["contact_iterations"] / max(sim.stats["contact_steps"], 1), wall_seconds=seconds, max_overlap=sim.stats["max_overlap"],
                 ke_per_sphere=float(ts.observe.kinetic_energy(st) / st.x.shape[0]))
 
 
 def report(rows, argv, threads, scene_path) -> str:
-    """Markdown table of the runs (docs/granular.md section 'heap')."""
+    """Markdown tables of the runs and, over several pours, their means (docs/granular.md
+    section 'heap')."""
     lines = [f"Measured {datetime.date.today()} on {cpu_name()}, {threads} thread(s): "
              f"`python tools/heap.py {' '.join(argv)}`".rstrip(),
-             "", f"Scene `{scene_path}`; angle from the surface profile between 20 % and "
-                 "80 % of the heap's height above the platform. Wall time: the whole run, "
-                 "on a machine shared with other work.", "",
-             "| mu | mu_r | angle of repose [deg] | heap height [mm] | simulated [s] | "
-             "wall [s] | max overlap / d |", "|---|---|---|---|---|---|---|"]
+             "", f"Scene `{scene_path}`; profile angle from the surface profile between 20 % "
+                 "and 80 % of the heap's height above the platform; fixed-base angle "
+                 "atan((H - d) / R), H the heap's height, R the platform's radius. Wall time: "
+                 "the whole run, on a machine shared with other work.", "",
+             "| seed | mu | mu_r | profile angle [deg] | fixed-base angle [deg] | heap height "
+             "[mm] | simulated [s] | wall [s] | max overlap / d |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['mu']:g} | {r['mu_r']:g} | {r['angle']:.1f} | "
-                     f"{1e3 * r['height']:.1f} | {r['time']:.2f} | {r['wall_seconds']:.0f} | "
-                     f"{r['max_overlap']:.1e} |")
+        seed = "scene" if r.get("seed") is None else r["seed"]
+        lines.append(f"| {seed} | {r['mu']:g} | {r['mu_r']:g} | {r['angle']:.1f} | "
+                     f"{r['base_angle']:.1f} | {1e3 * r['height']:.1f} | {r['time']:.2f} | "
+                     f"{r['wall_seconds']:.0f} | {r['max_overlap']:.1e} |")
+    summary = summarise(rows)
+    if any(s["n"] > 1 for s in summary):
+        lines += ["", "Mean ± standard deviation over the pours (profile angle over the "
+                      "pours it could fit):", "",
+                  "| mu | mu_r | pours | profile angle [deg] (fits) | fixed-base angle [deg] | "
+                  "heap height [mm] |", "|---|---|---|---|---|---|"]
+        for s in summary:
+            lines.append(f"| {s['mu']:g} | {s['mu_r']:g} | {s['n']} | "
+                         f"{mean_sd(s['angle'], s['angle_sd'])} ({s['fits']}) | "
+                         f"{mean_sd(s['base_angle'], s['base_angle_sd'])} | "
+                         f"{mean_sd(s['height'], s['height_sd'], 1e3)} |")
     return "\n".join(lines)
 
 
@@ -136,19 +219,22 @@ def main(argv=None):
                    help="largest move per step / smallest radius (default: the engine's)")
     p.add_argument("--iterations", type=int, default=None,
                    help="contact solver velocity sweeps per step at most (Rules)")
+    p.add_argument("--seeds", type=int, nargs="+", default=[None],
+                   help="pour once per seed (default: once, the scene's own seeds)")
     p.add_argument("--write", action="store_true")
     p.add_argument("--no-write", dest="write", action="store_false")
     a = p.parse_args(argv)
-    scene = ts.load_scene(a.scene)
+    base = dict(floor=a.base[0], below=a.below, centre=a.base[1:3], within=a.base[3])
+    options = {k: v for k, v in (("step_fraction", a.step_fraction),
+                                 ("contact_iterations", a.iterations)) if v}
     rows = []
-    for mu in a.mu:
-        for mu_r in a.mu_r:
-            base = dict(floor=a.base[0], below=a.below, centre=a.base[1:3], within=a.base[3])
-            options = {k: v for k, v in (("step_fraction", a.step_fraction),
-                                         ("contact_iterations", a.iterations)) if v}
-            rows.append(run_heap(scene, mu, mu_r, a.duration, a.rest, a.threads, base,
-                                 options))
-            print(rows[-1], flush=True)
+    for seed in a.seeds:
+        scene = heap_scene(a.scene, seed)
+        for mu in a.mu:
+            for mu_r in a.mu_r:
+                rows.append(dict(run_heap(scene, mu, mu_r, a.duration, a.rest, a.threads,
+                                          base, options), seed=seed))
+                print(rows[-1], flush=True)
     text = report(rows, [x for x in argv if x != "--write"], a.threads,
                   os.path.relpath(a.scene, os.path.join(os.path.dirname(__file__), "..")))
     print(text)

@@ -16,7 +16,11 @@ Setups (``--setup``):
   the box floor, collapsing into a low deposit.
 Both codes start from the same positions and velocities. The angle is measured from
 the surface profile as in tools/heap.py (the highest sphere top in radial bins one
-diameter wide, a straight line between 20 % and 80 % of the heap's height).
+diameter wide, a straight line between 20 % and 80 % of the heap's height), and on the
+funnel's platform also as the fixed-base angle atan((H - d) / R). With several
+``--seed`` values, each (mu, mu_r) runs once per seed (the funnel's pour, or the
+column's lattice jitter, drawn from it) and the report adds means and standard
+deviations per code.
 taichi_spheres: hard spheres, Walton impacts, the contact solver with Coulomb friction
 and rolling resistance (torque <= mu_r r_eff F_n). LAMMPS: tools/lammps_silo.py's
 contact model (Hertz, E = 5e9 Pa, nu = 0.3, damping from the restitution, Mindlin
@@ -25,6 +29,7 @@ faces (fix wall/gran planes) and the geometry, dt = 5e-6 s. LAMMPS runs in a sec
 process beside taichi_spheres, one thread each (a machine with two cores or more).
 
     python tools/peer_lammps_heap.py --mu 0.3 0.6 --mu-r 0.1
+    python tools/peer_lammps_heap.py --mu 0.3 0.6 --mu-r 0.1 --seed 7 8 9
     python tools/peer_lammps_heap.py --setup column --count 1500 --duration 1.5
     python tools/peer_lammps_heap.py --write        # the 'peer-heap' section of docs/granular.md
 """
@@ -54,12 +59,14 @@ DENSITY = 2500.0
 FLAT = 0.05
 
 
-def column_scene(a):
+def column_scene(a, seed=None):
     """(scene, base) of the column setup: spheres at rest in a radius a.column about the
-    box's vertical axis; base: tools/heap.py repose_angle arguments."""
+    box's vertical axis, the lattice jittered from seed (None: 1); base: tools/heap.py
+    repose_angle arguments."""
     import taichi_spheres as ts
     centre = np.array([a.box / 2, a.box / 2])
-    x = lammps_silo.fill_lattice(a.count, a.radius, a.column, 0.0, centre, seed=a.seed)
+    x = lammps_silo.fill_lattice(a.count, a.radius, a.column, 0.0, centre,
+                                 seed=1 if seed is None else seed)
     hi = np.array([a.box, a.box, float(x[:, 2].max()) + 2 * a.radius])
     scene = ts.Scene.from_arrays(x, np.zeros_like(x), a.radius, density=DENSITY,
                                  box=(np.zeros(3), hi), gravity=(0, 0, -lammps_silo.G),
@@ -67,10 +74,10 @@ def column_scene(a):
     return scene, dict(floor=0.0, centre=centre)
 
 
-def funnel_scene(a):
-    """(scene, base) of the funnel setup (scenes/heap.toml; tools/heap.py's base)."""
-    import taichi_spheres as ts
-    scene = ts.load_scene(a.scene)
+def funnel_scene(a, seed=None):
+    """(scene, base) of the funnel setup (scenes/heap.toml poured from seed, None: the
+    file's own seeds; tools/heap.py's base)."""
+    scene = heap.heap_scene(a.scene, seed)
     return scene, dict(floor=0.14, below=0.195, centre=(0.15, 0.15), within=0.06)
 
 
@@ -142,22 +149,58 @@ def lammps_run(a, scene, mu, mu_r, base) -> dict:
     lmp.close()
     angle, height, _ = heap.repose_angle(x[ids], scene.radius[ids], **base)
     return dict(angle=angle, height=height, wall_seconds=seconds, lost=n - len(ids),
-                version=version)
+                base_angle=heap.base_angle(base, height, scene.radius), version=version)
+
+
+def run_both(a, pool, scene, mu, mu_r, base) -> list:
+    """[(code, result)] of the codes in a.codes on one scene, LAMMPS in pool's process
+    beside taichi_spheres; a LAMMPS run that stops gives nan results and a message."""
+    pending = pool.submit(lammps_run, a, scene, mu, mu_r, base) \
+        if "lammps" in a.codes else None
+    runs = []
+    if "taichi_spheres" in a.codes:
+        runs.append(("taichi_spheres", taichi_run(a, scene, mu, mu_r, base)))
+    if pending is not None:
+        try:
+            out = pending.result()
+        except Exception as exc:           # LAMMPS stopped: say so, go on
+            print(f"LAMMPS failed at mu {mu}, mu_r {mu_r}: {exc}", flush=True)
+            out = dict(angle=math.nan, height=math.nan, wall_seconds=math.nan,
+                       base_angle=math.nan)
+        runs.append(("LAMMPS", out))
+    return runs
 
 
 def report(rows, argv, a, scene, version) -> str:
+    """Markdown tables of the runs and, over several seeds, the mean ± standard deviation
+    per code (docs/granular.md section 'peer-heap')."""
     what = (f"`{os.path.relpath(a.scene, os.path.join(HERE, '..'))}`" if a.setup == "funnel"
             else f"a column of radius {1e3 * a.column:g} mm released at rest on the floor")
     lines = [f"Measured {datetime.date.today()} on {cpu_name()}, 1 thread each: "
              f"`python tools/peer_lammps_heap.py {' '.join(argv)}`".rstrip(), "",
              f"{scene.n} spheres of d = {2e3 * float(scene.radius[0]):g} mm, {what}; heap "
              f"after {a.duration:g} s. {version}: E = {a.young:g} Pa, nu = 0.3, "
-             f"dt = {a.dt:g} s.", "",
-             "| mu | mu_r | code | angle [deg] | height [mm] | wall s |",
-             "|---|---|---|---|---|---|"]
+             f"dt = {a.dt:g} s. Profile angle: a line through the surface profile between "
+             "20 % and 80 % of the heap's height; fixed-base angle: atan((H - d) / R) on "
+             "the platform of radius R.", "",
+             "| seed | mu | mu_r | code | profile angle [deg] | fixed-base angle [deg] | "
+             "height [mm] | wall s |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['mu']:g} | {r['mu_r']:g} | {r['code']} | {r['angle']:.1f} | "
-                     f"{1e3 * r['height']:.1f} | {r['wall']:.0f} |")
+        seed = "scene" if r.get("seed") is None else r["seed"]
+        lines.append(f"| {seed} | {r['mu']:g} | {r['mu_r']:g} | {r['code']} | "
+                     f"{r['angle']:.1f} | {r['base_angle']:.1f} | {1e3 * r['height']:.1f} | "
+                     f"{r['wall']:.0f} |")
+    summary = heap.summarise(rows, ("mu", "mu_r", "code"))
+    if any(s["n"] > 1 for s in summary):
+        lines += ["", "Mean ± standard deviation over the seeds (profile angle over the runs "
+                      "it could fit):", "",
+                  "| mu | mu_r | code | runs | profile angle [deg] (fits) | fixed-base angle "
+                  "[deg] | height [mm] |", "|---|---|---|---|---|---|---|"]
+        for s in summary:
+            lines.append(f"| {s['mu']:g} | {s['mu_r']:g} | {s['code']} | {s['n']} | "
+                         f"{heap.mean_sd(s['angle'], s['angle_sd'])} ({s['fits']}) | "
+                         f"{heap.mean_sd(s['base_angle'], s['base_angle_sd'])} | "
+                         f"{heap.mean_sd(s['height'], s['height_sd'], 1e3)} |")
     return "\n".join(lines)
 
 
@@ -176,34 +219,27 @@ def main(argv=None):
     p.add_argument("--e", type=float, default=0.5)
     p.add_argument("--young", type=float, default=5e9)
     p.add_argument("--dt", type=float, default=5e-6)
-    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--seed", type=int, nargs="+", default=[None],
+                   help="one run per seed: the funnel's pour (default: the scene file's "
+                        "seeds) or the column's lattice jitter (default 1)")
     p.add_argument("--codes", nargs="+", default=["taichi_spheres", "lammps"])
     p.add_argument("--write", action="store_true")
     a = p.parse_args(argv)
-    scene, base = (funnel_scene if a.setup == "funnel" else column_scene)(a)
     rows, version = [], "LAMMPS"
     # LAMMPS runs in a second process beside taichi_spheres (one core each)
     context = multiprocessing.get_context("spawn")
     with concurrent.futures.ProcessPoolExecutor(1, mp_context=context) as pool:
-        for mu in a.mu:
-            for mu_r in a.mu_r:
-                pending = pool.submit(lammps_run, a, scene, mu, mu_r, base) \
-                    if "lammps" in a.codes else None
-                runs = []
-                if "taichi_spheres" in a.codes:
-                    runs.append(("taichi_spheres", taichi_run(a, scene, mu, mu_r, base)))
-                if pending is not None:
-                    try:
-                        out = pending.result()
-                        version = out["version"]
-                    except Exception as exc:           # LAMMPS stopped: say so, go on
-                        print(f"LAMMPS failed at mu {mu}, mu_r {mu_r}: {exc}", flush=True)
-                        out = dict(angle=math.nan, height=math.nan, wall_seconds=math.nan)
-                    runs.append(("LAMMPS", out))
-                for code, out in runs:
-                    rows.append(dict(mu=mu, mu_r=mu_r, code=code, wall=out["wall_seconds"],
-                                     angle=out["angle"], height=out["height"]))
-                    print(rows[-1], flush=True)
+        for seed in a.seed:
+            scene, base = (funnel_scene if a.setup == "funnel" else column_scene)(a, seed)
+            for mu in a.mu:
+                for mu_r in a.mu_r:
+                    for code, out in run_both(a, pool, scene, mu, mu_r, base):
+                        version = out.get("version", version)
+                        rows.append(dict(seed=seed, mu=mu, mu_r=mu_r, code=code,
+                                         wall=out["wall_seconds"], angle=out["angle"],
+                                         base_angle=out["base_angle"],
+                                         height=out["height"]))
+                        print(rows[-1], flush=True)
     text = report(rows, [s for s in argv if s != "--write"], a, scene, version)
     print(text)
     if a.write:
