@@ -174,3 +174,26 @@ def test_row_activity_replay_skips_only_rows_that_would_change_nothing():
     assert (counted["updates"], counted["skipped"], counted["sweeps"]) == (4, 1, 2)
     assert (skipped["updates"], skipped["skipped"]) == (4, 1)
     assert counted["v"].tolist() == skipped["v"].tolist() == [[0, 0, 0], [0, 0, 1]]
+
+
+def test_direct_solve_of_a_stack_on_the_floor_is_exact():
+    """Two spheres stacked on the floor, both falling at 1 m/s: the Delassus matrix is
+    the one the sweeps apply, and the active-set solve, started with the floor row
+    alone, adds the pair row and stops both: the floor row carries both momenta (6 N s),
+    the pair row the top sphere's (4 N s)."""
+    p = dict(a=np.array([0, 1]), b=np.array([-1, 0]), normal=np.array([[0, 0, 1.0]] * 2),
+             meff=np.array([1.0, 1.0]), target=np.zeros(2), lam=np.zeros(2),
+             v=np.array([[0, 0, -1.0], [0, 0, -1.0]]), inv_mass=np.array([0.5, 0.25]),
+             order=np.array([0, 1]), h=1e-3, d=1.0)
+    prob = solver_convergence.Problem(p)
+    W = solver_convergence.delassus(prob)
+    probe = np.array([0.3, -0.7])
+    assert W @ probe == pytest.approx(prob.gather(prob.scatter(probe)))
+    start = np.array([True, False])            # the pair row must join the active set
+    lam, solves, seconds, fill, done = solver_convergence.active_set_solve(
+        W, prob.linear, start, 0.0)
+    assert done and solves == 2 and len(seconds) == 2 and fill > 0
+    assert lam == pytest.approx([6.0, 4.0])
+    assert prob.velocities(lam) == pytest.approx(np.zeros((2, 3)))
+    (eps, n, ok, _, _, e), = solver_convergence.direct_rows(prob, lam, np.zeros((2, 3)), [0.0])
+    assert (n, ok, e["max"]) == (1, True, pytest.approx(0.0, abs=1e-15))

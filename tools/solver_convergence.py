@@ -39,6 +39,18 @@ scale, only more fine sweeps reduce it. Last, the share the 1, 10 and 30 % of sp
 with the largest error carry (how concentrated it is: extra sweeps where the error
 sits could help only a concentrated one).
 
+Last, a direct solve (``--direct-eps``): the Delassus matrix W = J M^-1 J^T of the
+rows (scipy.sparse), the rows the converged solution holds active (lambda > 0) solved
+exactly, W_AA lambda_A = -(J v_free - target)_A, by a sparse LU factorization
+(SuperLU, scipy.sparse.linalg.splu), then the active set changed (rows with lambda < 0
+leave it, inactive rows that approach faster than their target join it) and solved
+again until no row violates either (an active-set method, at most 30 solves). W_AA is
+near singular where the bed holds about as many contacts as degrees of freedom, so
+eps times W's mean diagonal is added to it (a compliance, as a soft constraint's).
+Reported per eps: solves, the factorization's time, its fill and the error against the
+converged solution, beside the wall time of the engine's own sweeps of the same step
+(timed in capture(), parallel solver path, 1 thread).
+
     python tools/solver_convergence.py            # ~2 min
     python tools/solver_convergence.py --write    # into docs/bench.md
 """
@@ -48,6 +60,7 @@ import argparse
 import datetime
 import os
 import sys
+import time
 
 import numpy as np
 
@@ -97,7 +110,9 @@ def capture(scene_path: str, at: float, changes=None) -> dict:
                            inv_mass=1.0 / np.asarray(scene.mass, dtype=np.float64),
                            h=float(solver.params.h[None]), sweeps=cap,
                            tol=float(tol[None]))
+        t0 = time.perf_counter()
         done = inner(mode, cap, tol)
+        box["rows"]["engine_seconds"] = time.perf_counter() - t0
         box["rows"]["engine_v"] = solver.state.v.to_numpy()[:k]
         box["rows"]["engine_sweeps"] = done
         return done
@@ -285,6 +300,79 @@ def apgd(prob: Problem, iterations: int, keep=()) -> tuple:
     return g, out
 
 
+def delassus(prob: Problem):
+    """The Delassus matrix W = J M^-1 J^T of the rows (scipy.sparse CSC, rows x rows)
+    [1/kg]: W lambda = prob.gather(prob.scatter(lambda))."""
+    import scipy.sparse as sparse
+    p, n, N = prob.p, len(prob.a), prob.N
+    rows = np.repeat(np.arange(n), 3)
+    on_a = sparse.csr_matrix((prob.n.ravel(), (rows, (3 * prob.a[:, None] + np.arange(3)).ravel())),
+                             shape=(n, 3 * N))
+    pairs = np.flatnonzero(prob.pair)
+    on_b = sparse.csr_matrix((prob.n[pairs].ravel(), (np.repeat(pairs, 3),
+                              (3 * prob.b[pairs][:, None] + np.arange(3)).ravel())),
+                             shape=(n, 3 * N))
+    J = on_a - on_b
+    return (J @ sparse.diags(np.repeat(p["inv_mass"], 3)) @ J.T).tocsc()
+
+
+def active_set_solve(W, q, active, eps, most=30) -> tuple:
+    """The complementarity problem lambda >= 0, W lambda + q >= 0, lambda (W lambda + q)
+    = 0 by active-set iterations from the rows ``active`` (bool): each solves (W_AA + eps
+    I) lambda_A = -q_A by a sparse LU (SuperLU), drops the rows with lambda < 0 and adds
+    the inactive rows with W lambda + q < 0, until none changes or ``most`` solves.
+    Returns (lambda >= 0, solves, factorization seconds each, fill nnz(L + U) of the
+    last, converged)."""
+    import scipy.sparse as sparse
+    from scipy.sparse.linalg import splu
+    active = active.copy()
+    seconds = []
+    for solve in range(1, most + 1):
+        idx = np.flatnonzero(active)
+        block = (W[idx][:, idx] + eps * sparse.eye(len(idx))).tocsc()
+        t0 = time.perf_counter()
+        lu = splu(block, permc_spec="COLAMD")
+        seconds.append(time.perf_counter() - t0)
+        lam = np.zeros(len(q))
+        lam[idx] = lu.solve(-q[idx])
+        negative, violated = lam < 0, ~active & (W @ lam + q < 0)
+        if not negative.any() and not violated.any():
+            return lam, solve, seconds, lu.L.nnz + lu.U.nnz, True
+        active = (active & ~negative) | violated
+    return np.maximum(lam, 0.0), most, seconds, lu.L.nnz + lu.U.nnz, False
+
+
+def direct_rows(prob: Problem, lam_true, truth, eps_list) -> list:
+    """(eps [relative to W's mean diagonal], solves, converged, median factorization
+    seconds, fill, errors against truth) of active_set_solve from the converged solution's
+    active set, for each eps."""
+    W = delassus(prob)
+    scale = float(W.diagonal().mean())
+    out = []
+    for eps in eps_list:
+        lam, solves, seconds, fill, done = active_set_solve(W, prob.linear, lam_true > 0,
+                                                            eps * scale)
+        out.append((eps, solves, done, float(np.median(seconds)), fill,
+                    errors(prob.velocities(lam), truth, prob.p["h"], prob.p["d"])))
+    return out
+
+
+def direct_report(p, lam_true, rows) -> list:
+    """The markdown lines of the direct-solve table (direct_rows's rows)."""
+    held = len(np.unique(np.concatenate([p["a"], p["b"][p["b"] >= 0]])))
+    lines = ["", f"Direct solve of the active contacts: {int((lam_true > 0).sum())} of the "
+             f"{len(p['a'])} rows active in the converged solution, on {held} spheres "
+             f"({3 * held} degrees of freedom). The engine's {p['engine_sweeps']} sweeps of "
+             f"this step took {1e3 * p['engine_seconds']:.1f} ms (1 thread).", "",
+             "| eps / mean diagonal | solves | converged | one factorization [ms] | "
+             "fill nnz(L+U) | largest velocity error [m/s] | rms [m/s] |",
+             "|---|---|---|---|---|---|---|"]
+    for eps, solves, done, seconds, fill, e in rows:
+        lines.append(f"| {eps:.0e} | {solves} | {'yes' if done else 'no'} | "
+                     f"{1e3 * seconds:.0f} | {fill:,} | {e['max']:.1e} | {e['rms']:.1e} |")
+    return lines
+
+
 def errors(v, truth, h, d) -> dict:
     e = np.linalg.norm(v - truth, axis=1)
     return dict(max=float(e.max()), rms=float(np.sqrt(np.mean(e * e))), overlap=float(e.max() * h / d))
@@ -348,10 +436,18 @@ def smooth_report(sweeps, smooth, top) -> list:
     return lines
 
 
+def direct_option(eps_list) -> str:
+    """' --direct-eps ...' for the report's command where it is not the default."""
+    if list(eps_list) == [1e-8, 1e-6, 1e-4]:
+        return ""
+    return " --direct-eps" + "".join(f" {e:g}" for e in eps_list)
+
+
 def report(args, p, res_true, pgs_rows, apgd_rows, check, variant_rows=()) -> str:
     lines = [f"Measured {datetime.date.today()} on {cpu_name()}: "
              f"`python tools/solver_convergence.py{' --at ' + str(args.at) if args.at != 1.0 else ''}"
-             f"{' --smooth-sweeps ' + str(args.smooth_sweeps) if args.smooth_sweeps != 100 else ''}`",
+             f"{' --smooth-sweeps ' + str(args.smooth_sweeps) if args.smooth_sweeps != 100 else ''}"
+             f"{direct_option(args.direct_eps)}`",
              "",
              f"`scenes/pour.toml` (frictionless, e = 0.5), the velocity problem of the step after "
              f"t = {args.at} s: {len(p['a'])} rows for {len(p['v'])} spheres, step "
@@ -383,6 +479,9 @@ def main(argv=None):
     ap.add_argument("--truth", type=int, default=5000, help="APGD iterations for the converged solution")
     ap.add_argument("--smooth-sweeps", type=int, default=100,
                     help="over-relaxed sweeps (1.8) whose error the smoothness table splits")
+    ap.add_argument("--direct-eps", type=float, nargs="*", default=[1e-8, 1e-6, 1e-4],
+                    help="regularizations of the direct solve, relative to the Delassus "
+                         "matrix's mean diagonal (none: no direct solve)")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args(argv)
     ts.runtime.ensure("cpu", "f64", threads=1)
@@ -413,6 +512,9 @@ def main(argv=None):
     text = report(args, p, res_true, pgs_rows, apgd_rows, check, variant_rows)
     text += "\n" + "\n".join(smooth_report(args.smooth_sweeps,
                                            *smoothness(p, by[args.smooth_sweeps], truth)))
+    if args.direct_eps:
+        text += "\n" + "\n".join(direct_report(
+            p, lam_true, direct_rows(prob, lam_true, truth, args.direct_eps)))
     publish(text, "solver-convergence", args.write)
 
 
