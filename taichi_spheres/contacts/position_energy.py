@@ -59,8 +59,9 @@ class PositionEnergy:
 
     @ti.func
     def bound_position_pass(self):
-        """Scale the pseudo-velocities w down where their lift would exceed the budget
-        (module docstring; kernel top level, before x += h w)."""
+        """lift_scale: the factor (at most 1) that keeps the pseudo-velocities' lift within
+        the budget (module docstring; kernel top level, before finish's x += h w, which
+        scales w by it)."""
         n = self.state.n_spheres[None]
         h = self.params.h[None]
         chunks = (n + WARM_CHUNK - 1) // WARM_CHUNK
@@ -74,7 +75,3 @@ class PositionEnergy:
             if total[1] > ti.max(total[0], 0):
                 scale = ti.max(total[0], 0) / total[1]
             self.lift_scale[None] = scale
-        ti.loop_config(serialize=ti.static(self.serial))
-        for i in range(n):
-            if self.lift_scale[None] < 1:
-                self.w[i] *= self.lift_scale[None]

@@ -283,10 +283,11 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
 
     @ti.func
     def finish(self):
-        """x += h w; book the energy the solve removed (kinetic, and the potential energy
-        of its moves), the largest speed and the largest overlap (on the rows, then over
-        every pair, wall and object: overlaps.py); keep the impulses for the next step's
-        warm start; with Rules.substeps, mark_near (kernel top level)."""
+        """x += h w (w first scaled by lift_scale with Rules.bounded_position_pass); book
+        the energy the solve removed (kinetic, and the potential energy of its moves),
+        the largest speed and the largest overlap (on the rows, then over every pair,
+        wall and object: overlaps.py); keep the impulses for the next step's warm start;
+        with Rules.substeps, mark_near (kernel top level)."""
         if ti.static(self.bounded_position_pass):
             self.bound_position_pass()
         h = self.params.h[None]
@@ -295,6 +296,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             self.params.vmax2_near[None] = 0
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.state.n_spheres[None]):
+            if ti.static(self.bounded_position_pass):
+                if self.lift_scale[None] < 1:
+                    self.w[i] *= self.lift_scale[None]
             self.state.x[i] += h * self.w[i]
             loss = self.kinetic_spent(i)
             if ti.static(self.f.gravity):
