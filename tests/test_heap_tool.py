@@ -75,3 +75,19 @@ def test_summary_over_pours_skips_heaps_the_fit_could_not_measure():
     assert (high["n"], high["angle"]) == (1, 25.0) and math.isnan(high["angle_sd"])
     assert heap.mean_sd(21.0, 1.4142) == "21.0 ± 1.4"
     assert heap.mean_sd(0.026, math.nan, 1e3) == "26.0"
+
+
+def test_a_lammps_heap_starts_without_overlaps_when_held():
+    """LAMMPS's final positions overlap (soft contacts): the held scene keeps the spheres
+    below the funnel that LAMMPS did not lose, at rest, with radii shrunk just enough."""
+    import peer_lammps_heap
+    scene = heap.heap_scene(HEAP_SCENE)
+    r = float(scene.radius[0])
+    x = np.full((scene.n, 3), np.nan)
+    x[:3] = [[0.05, 0.05, r], [0.05 + 2 * r * (1 - 1e-3), 0.05, r], [0.25, 0.25, 0.1]]
+    x[3] = [0.1, 0.1, 0.3]                                  # still in the funnel's column
+    held, shrink = peer_lammps_heap.held_scene(scene, x, below=0.195)
+    assert held.n == 3 and np.array_equal(held.x, x[:3])
+    assert shrink == pytest.approx(1e-3 + 5e-4)
+    assert held.radius == pytest.approx(np.full(3, r * (1 - shrink)))
+    assert np.array_equal(held.mass, scene.mass[:3]) and not held.v.any()

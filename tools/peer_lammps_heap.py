@@ -21,6 +21,12 @@ funnel's platform also as the fixed-base angle atan((H - d) / R). With several
 ``--seed`` values, each (mu, mu_r) runs once per seed (the funnel's pour, or the
 column's lattice jitter, drawn from it) and the report adds means and standard
 deviations per code.
+
+With ``--hold SECONDS``, taichi_spheres also starts from LAMMPS's final heap (the
+spheres below the funnel, at rest, radii shrunk by the largest LAMMPS overlap plus
+5e-4 so that no two start overlapping, masses kept) and runs it SECONDS more with the
+same mu and mu_r: whether it holds LAMMPS's heap (statics) or lets it slump, apart
+from how each code builds one (the pour's impacts).
 taichi_spheres: hard spheres, Walton impacts, the contact solver with Coulomb friction
 and rolling resistance (torque <= mu_r r_eff F_n). LAMMPS: tools/lammps_silo.py's
 contact model (Hertz, E = 5e9 Pa, nu = 0.3, damping from the restitution, Mindlin
@@ -30,6 +36,7 @@ process beside taichi_spheres, one thread each (a machine with two cores or more
 
     python tools/peer_lammps_heap.py --mu 0.3 0.6 --mu-r 0.1
     python tools/peer_lammps_heap.py --mu 0.3 0.6 --mu-r 0.1 --seed 7 8 9
+    python tools/peer_lammps_heap.py --mu 0.6 --hold 1.0
     python tools/peer_lammps_heap.py --setup column --count 1500 --duration 1.5
     python tools/peer_lammps_heap.py --write        # the 'peer-heap' section of docs/granular.md
 """
@@ -51,6 +58,7 @@ sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, HERE)
 
 import heap  # noqa: E402  (tools/heap.py)
+import peer_lammps  # noqa: E402  (tools/peer_lammps.py)
 import lammps_silo  # noqa: E402  (tools/lammps_silo.py)
 from machine import cpu_name, write_section  # noqa: E402
 
@@ -149,7 +157,35 @@ def lammps_run(a, scene, mu, mu_r, base) -> dict:
     lmp.close()
     angle, height, _ = heap.repose_angle(x[ids], scene.radius[ids], **base)
     return dict(angle=angle, height=height, wall_seconds=seconds, lost=n - len(ids),
-                base_angle=heap.base_angle(base, height, scene.radius), version=version)
+                base_angle=heap.base_angle(base, height, scene.radius), version=version,
+                x=x)
+
+
+def held_scene(scene, x, below=math.inf):
+    """(scene, shrink) of LAMMPS's final positions x (N, 3) [m], nan for a sphere it
+    lost: the spheres below ``below`` [m] at rest, their radii times (1 - shrink) with
+    shrink the largest pair overlap / (r_i + r_j) plus 5e-4 (doubled until no sphere
+    starts overlapping a sphere, wall or object; at most 1 %), masses kept."""
+    keep = np.isfinite(x[:, 0]) & (x[:, 2] < below)
+    x, radius = x[keep], scene.radius[keep]
+    pair, _ = peer_lammps.largest_overlaps(x, radius, scene.box_lo, scene.box_hi)
+    shrink = pair + 5e-4
+    while True:
+        try:
+            return scene.replace(x=x, v=np.zeros_like(x), radius=radius * (1 - shrink),
+                                 mass=scene.mass[keep], omega=np.zeros_like(x),
+                                 material=scene.material[keep]), shrink
+        except ValueError:
+            if shrink > 0.01:
+                raise
+            shrink *= 2
+
+
+def hold_run(a, scene, x, mu, mu_r, base) -> dict:
+    """taichi_spheres run a.hold s from LAMMPS's final heap x (held_scene) with friction
+    mu and rolling friction mu_r: tools/heap.py's result, and the shrink used."""
+    held, shrink = held_scene(scene, x, base.get("below", math.inf))
+    return dict(heap.run_heap(held, mu, mu_r, a.hold, 0.0, 1, base), shrink=shrink)
 
 
 def run_both(a, pool, scene, mu, mu_r, base) -> list:
@@ -168,7 +204,21 @@ def run_both(a, pool, scene, mu, mu_r, base) -> list:
             out = dict(angle=math.nan, height=math.nan, wall_seconds=math.nan,
                        base_angle=math.nan)
         runs.append(("LAMMPS", out))
+        if a.hold > 0 and "x" in out:
+            runs.append(("taichi_spheres holding LAMMPS's heap",
+                         hold_run(a, scene, out["x"], mu, mu_r, base)))
     return runs
+
+
+def hold_text(rows, a) -> str:
+    """The report's sentence on the held heaps (--hold), or ''."""
+    if a.hold <= 0:
+        return ""
+    shrink = max((r["shrink"] for r in rows if math.isfinite(r.get("shrink", math.nan))),
+                 default=math.nan)
+    return (f" *taichi_spheres holding LAMMPS's heap*: LAMMPS's final spheres below the "
+            f"funnel, at rest, radii shrunk by at most {shrink:.1e} (no overlaps), run "
+            f"{a.hold:g} s more with the same mu and mu_r.")
 
 
 def report(rows, argv, a, scene, version) -> str:
@@ -182,7 +232,7 @@ def report(rows, argv, a, scene, version) -> str:
              f"after {a.duration:g} s. {version}: E = {a.young:g} Pa, nu = 0.3, "
              f"dt = {a.dt:g} s. Profile angle: a line through the surface profile between "
              "20 % and 80 % of the heap's height; fixed-base angle: atan((H - d) / R) on "
-             "the platform of radius R.", "",
+             "the platform of radius R." + hold_text(rows, a), "",
              "| seed | mu | mu_r | code | profile angle [deg] | fixed-base angle [deg] | "
              "height [mm] | wall s |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -223,7 +273,11 @@ def main(argv=None):
                    help="one run per seed: the funnel's pour (default: the scene file's "
                         "seeds) or the column's lattice jitter (default 1)")
     p.add_argument("--codes", nargs="+", default=["taichi_spheres", "lammps"])
+    p.add_argument("--hold", type=float, default=0.0, help="also run taichi_spheres this "
+                   "long [s] from LAMMPS's final heap (0: not)")
     p.add_argument("--write", action="store_true")
+    p.add_argument("--section", default="peer-heap",
+                   help="the docs/granular.md section --write replaces")
     a = p.parse_args(argv)
     rows, version = [], "LAMMPS"
     # LAMMPS runs in a second process beside taichi_spheres (one core each)
@@ -238,12 +292,13 @@ def main(argv=None):
                         rows.append(dict(seed=seed, mu=mu, mu_r=mu_r, code=code,
                                          wall=out["wall_seconds"], angle=out["angle"],
                                          base_angle=out["base_angle"],
-                                         height=out["height"]))
+                                         height=out["height"],
+                                         shrink=out.get("shrink", math.nan)))
                         print(rows[-1], flush=True)
     text = report(rows, [s for s in argv if s != "--write"], a, scene, version)
     print(text)
     if a.write:
-        write_section(os.path.join(HERE, "..", "docs", "granular.md"), "peer-heap", text)
+        write_section(os.path.join(HERE, "..", "docs", "granular.md"), a.section, text)
 
 
 if __name__ == "__main__":
