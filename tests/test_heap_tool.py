@@ -86,8 +86,11 @@ def test_a_lammps_heap_starts_without_overlaps_when_held():
     x = np.full((scene.n, 3), np.nan)
     x[:3] = [[0.05, 0.05, r], [0.05 + 2 * r * (1 - 1e-3), 0.05, r], [0.25, 0.25, 0.1]]
     x[3] = [0.1, 0.1, 0.3]                                  # still in the funnel's column
+    x[4] = [0.15, 0.15, 0.1395 + r]      # on LAMMPS's disc, inside the 1 mm platform cone
     held, shrink = peer_lammps_heap.held_scene(scene, x, below=0.195)
-    assert held.n == 3 and np.array_equal(held.x, x[:3])
+    assert held.n == 4 and np.array_equal(held.x, x[[0, 1, 2, 4]])
+    platform = [g for g in held.geometry if not g.inside][0]
+    assert platform.length == 1e-6 and platform.point[2] == pytest.approx(0.1395 - 5e-7)
     assert shrink == pytest.approx(1e-3 + 5e-4)
-    assert held.radius == pytest.approx(np.full(3, r * (1 - shrink)))
-    assert np.array_equal(held.mass, scene.mass[:3]) and not held.v.any()
+    assert held.radius == pytest.approx(np.full(4, r * (1 - shrink)))
+    assert np.array_equal(held.mass, scene.mass[:4]) and not held.v.any()

@@ -24,8 +24,8 @@ deviations per code.
 
 With ``--hold SECONDS``, taichi_spheres also starts from LAMMPS's final heap (the
 spheres below the funnel, at rest, radii shrunk by the largest LAMMPS overlap plus
-5e-4 so that no two start overlapping, masses kept) and runs it SECONDS more with the
-same mu and mu_r: whether it holds LAMMPS's heap (statics) or lets it slump, apart
+5e-4 so that no two start overlapping, masses kept, the platform flattened to
+LAMMPS's disc) and runs it SECONDS more with the same mu and mu_r: whether it holds LAMMPS's heap (statics) or lets it slump, apart
 from how each code builds one (the pour's impacts).
 taichi_spheres: hard spheres, Walton impacts, the contact solver with Coulomb friction
 and rolling resistance (torque <= mu_r r_eff F_n). LAMMPS: tools/lammps_silo.py's
@@ -161,20 +161,37 @@ def lammps_run(a, scene, mu, mu_r, base) -> dict:
                 x=x)
 
 
+def as_lammps_disc(g):
+    """Geometry object g, or where LAMMPS has a disc for it (lammps_region: a flat
+    outside cone along z) a cone 1 um tall about the disc's top (the cone's mean
+    height), so that spheres resting on LAMMPS's disc rest on it."""
+    import taichi_spheres as ts
+    if not isinstance(g, ts.Cone) or isinstance(g, ts.Cylinder) or g.inside or \
+            g.length >= FLAT * max(g.radius_at_point, g.radius_at_end):
+        return g
+    up = float(np.asarray(g.axis, float)[2])
+    top = float(g.point[2]) + 0.5 * up * g.length
+    point = np.array([g.point[0], g.point[1], top - 0.5 * up * 1e-6])
+    return ts.Cone(point, g.axis, g.radius_at_point, g.radius_at_end, 1e-6, inside=False,
+                   restitution=g.restitution, friction=g.friction)
+
+
 def held_scene(scene, x, below=math.inf):
     """(scene, shrink) of LAMMPS's final positions x (N, 3) [m], nan for a sphere it
     lost: the spheres below ``below`` [m] at rest, their radii times (1 - shrink) with
     shrink the largest pair overlap / (r_i + r_j) plus 5e-4 (doubled until no sphere
-    starts overlapping a sphere, wall or object; at most 1 %), masses kept."""
+    starts overlapping a sphere, wall or object; at most 1 %), masses kept, a platform
+    flat as LAMMPS's disc (as_lammps_disc)."""
     keep = np.isfinite(x[:, 0]) & (x[:, 2] < below)
     x, radius = x[keep], scene.radius[keep]
     pair, _ = peer_lammps.largest_overlaps(x, radius, scene.box_lo, scene.box_hi)
     shrink = pair + 5e-4
+    shapes = tuple(as_lammps_disc(g) for g in scene.geometry)
     while True:
         try:
             return scene.replace(x=x, v=np.zeros_like(x), radius=radius * (1 - shrink),
                                  mass=scene.mass[keep], omega=np.zeros_like(x),
-                                 material=scene.material[keep]), shrink
+                                 material=scene.material[keep], geometry=shapes), shrink
         except ValueError:
             if shrink > 0.01:
                 raise
