@@ -195,5 +195,9 @@ def test_direct_solve_of_a_stack_on_the_floor_is_exact():
     assert done and solves == 2 and len(seconds) == 2 and fill > 0
     assert lam == pytest.approx([6.0, 4.0])
     assert prob.velocities(lam) == pytest.approx(np.zeros((2, 3)))
-    (eps, n, ok, _, _, e), = solver_convergence.direct_rows(prob, lam, np.zeros((2, 3)), [0.0])
-    assert (n, ok, e["max"]) == (1, True, pytest.approx(0.0, abs=1e-15))
+    converged, warm = solver_convergence.direct_rows(prob, lam, np.zeros((2, 3)), [0.0])
+    assert converged[0] == "converged" and warm[0] == "warm start"
+    assert converged[2:4] == (1, True) and converged[6]["max"] == pytest.approx(0.0, abs=1e-15)
+    # no warm impulse: the floor row joins after the first (empty) solve, the pair row
+    # after the second
+    assert warm[2:4] == (3, True) and warm[6]["max"] == pytest.approx(0.0, abs=1e-15)

@@ -47,9 +47,11 @@ leave it, inactive rows that approach faster than their target join it) and solv
 again until no row violates either (an active-set method, at most 30 solves). W_AA is
 near singular where the bed holds about as many contacts as degrees of freedom, so
 eps times W's mean diagonal is added to it (a compliance, as a soft constraint's).
-Reported per eps: solves, the factorization's time, its fill and the error against the
-converged solution, beside the wall time of the engine's own sweeps of the same step
-(timed in capture(), parallel solver path, 1 thread).
+Reported per eps and start (the converged solution's active set, or the rows with a
+warm impulse: what a solver knows before it solves): solves, the factorization's time,
+its fill and the error against the converged solution, beside the wall time of the
+engine's own sweeps of the same step (timed in capture(), parallel solver path, 1
+thread).
 
     python tools/solver_convergence.py            # ~2 min
     python tools/solver_convergence.py --write    # into docs/bench.md
@@ -321,39 +323,44 @@ def active_set_solve(W, q, active, eps, most=30) -> tuple:
     = 0 by active-set iterations from the rows ``active`` (bool): each solves (W_AA + eps
     I) lambda_A = -q_A by a sparse LU (SuperLU), drops the rows with lambda < 0 and adds
     the inactive rows with W lambda + q < 0, until none changes or ``most`` solves.
-    Returns (lambda >= 0, solves, factorization seconds each, fill nnz(L + U) of the
-    last, converged)."""
+    Returns (lambda >= 0, solves, seconds of each factorization (none for an empty
+    active set), fill nnz(L + U) of the last, converged)."""
     import scipy.sparse as sparse
     from scipy.sparse.linalg import splu
     active = active.copy()
-    seconds = []
+    seconds, fill = [], 0
     for solve in range(1, most + 1):
         idx = np.flatnonzero(active)
-        block = (W[idx][:, idx] + eps * sparse.eye(len(idx))).tocsc()
-        t0 = time.perf_counter()
-        lu = splu(block, permc_spec="COLAMD")
-        seconds.append(time.perf_counter() - t0)
         lam = np.zeros(len(q))
-        lam[idx] = lu.solve(-q[idx])
+        if len(idx):                         # none active: lambda = 0, no factorization
+            block = (W[idx][:, idx] + eps * sparse.eye(len(idx))).tocsc()
+            t0 = time.perf_counter()
+            lu = splu(block, permc_spec="COLAMD")
+            seconds.append(time.perf_counter() - t0)
+            fill = lu.L.nnz + lu.U.nnz
+            lam[idx] = lu.solve(-q[idx])
         negative, violated = lam < 0, ~active & (W @ lam + q < 0)
         if not negative.any() and not violated.any():
-            return lam, solve, seconds, lu.L.nnz + lu.U.nnz, True
+            return lam, solve, seconds, fill, True
         active = (active & ~negative) | violated
-    return np.maximum(lam, 0.0), most, seconds, lu.L.nnz + lu.U.nnz, False
+    return np.maximum(lam, 0.0), most, seconds, fill, False
 
 
 def direct_rows(prob: Problem, lam_true, truth, eps_list) -> list:
-    """(eps [relative to W's mean diagonal], solves, converged, median factorization
-    seconds, fill, errors against truth) of active_set_solve from the converged solution's
-    active set, for each eps."""
+    """(start, eps [relative to W's mean diagonal], solves, converged, median
+    factorization seconds, fill, errors against truth) of active_set_solve for each eps,
+    started from the converged solution's active set and from the warm start's (the
+    rows with a warm impulse: what a solver knows before it solves)."""
     W = delassus(prob)
     scale = float(W.diagonal().mean())
     out = []
-    for eps in eps_list:
-        lam, solves, seconds, fill, done = active_set_solve(W, prob.linear, lam_true > 0,
-                                                            eps * scale)
-        out.append((eps, solves, done, float(np.median(seconds)), fill,
-                    errors(prob.velocities(lam), truth, prob.p["h"], prob.p["d"])))
+    for start, active in (("converged", lam_true > 0), ("warm start", prob.p["lam"] > 0)):
+        for eps in eps_list:
+            lam, solves, seconds, fill, done = active_set_solve(W, prob.linear, active,
+                                                                eps * scale)
+            out.append((start, eps, solves, done,
+                        float(np.median(seconds)) if seconds else 0.0, fill,
+                        errors(prob.velocities(lam), truth, prob.p["h"], prob.p["d"])))
     return out
 
 
@@ -362,13 +369,15 @@ def direct_report(p, lam_true, rows) -> list:
     held = len(np.unique(np.concatenate([p["a"], p["b"][p["b"] >= 0]])))
     lines = ["", f"Direct solve of the active contacts: {int((lam_true > 0).sum())} of the "
              f"{len(p['a'])} rows active in the converged solution, on {held} spheres "
-             f"({3 * held} degrees of freedom). The engine's {p['engine_sweeps']} sweeps of "
-             f"this step took {1e3 * p['engine_seconds']:.1f} ms (1 thread).", "",
-             "| eps / mean diagonal | solves | converged | one factorization [ms] | "
-             "fill nnz(L+U) | largest velocity error [m/s] | rms [m/s] |",
-             "|---|---|---|---|---|---|---|"]
-    for eps, solves, done, seconds, fill, e in rows:
-        lines.append(f"| {eps:.0e} | {solves} | {'yes' if done else 'no'} | "
+             f"({3 * held} degrees of freedom), {int((p['lam'] > 0).sum())} with a warm "
+             f"impulse. The engine's {p['engine_sweeps']} sweeps of this step took "
+             f"{1e3 * p['engine_seconds']:.1f} ms (1 thread, the parallel solver path: one "
+             "launch per sweep).", "",
+             "| active set from | eps / mean diagonal | solves | converged | one "
+             "factorization [ms] | fill nnz(L+U) | largest velocity error [m/s] | rms [m/s] |",
+             "|---|---|---|---|---|---|---|---|"]
+    for start, eps, solves, done, seconds, fill, e in rows:
+        lines.append(f"| {start} | {eps:.0e} | {solves} | {'yes' if done else 'no'} | "
                      f"{1e3 * seconds:.0f} | {fill:,} | {e['max']:.1e} | {e['rms']:.1e} |")
     return lines
 
