@@ -94,3 +94,6 @@ def test_a_lammps_heap_starts_without_overlaps_when_held():
     assert shrink == pytest.approx(1e-3 + 5e-4)
     assert held.radius == pytest.approx(np.full(4, r * (1 - shrink)))
     assert np.array_equal(held.mass, scene.mass[:4]) and not held.v.any()
+    x[5] = [0.15, 0.15, 0.1]          # under the platform (its back face): not kept
+    on_platform, _ = peer_lammps_heap.held_scene(scene, x, below=0.195, floor=0.14)
+    assert np.array_equal(on_platform.x, x[[4]])

@@ -23,7 +23,7 @@ column's lattice jitter, drawn from it) and the report adds means and standard
 deviations per code.
 
 With ``--hold SECONDS``, taichi_spheres also starts from LAMMPS's final heap (the
-spheres below the funnel, at rest, radii shrunk by the largest LAMMPS overlap plus
+spheres on the platform, at rest, radii shrunk by the largest LAMMPS overlap plus
 5e-4 so that no two start overlapping, masses kept, the platform flattened to
 LAMMPS's disc) and runs it SECONDS more with the same mu and mu_r: whether it holds LAMMPS's heap (statics) or lets it slump, apart
 from how each code builds one (the pour's impacts).
@@ -176,13 +176,18 @@ def as_lammps_disc(g):
                    restitution=g.restitution, friction=g.friction)
 
 
-def held_scene(scene, x, below=math.inf):
+def held_scene(scene, x, below=math.inf, floor=-math.inf):
     """(scene, shrink) of LAMMPS's final positions x (N, 3) [m], nan for a sphere it
-    lost: the spheres below ``below`` [m] at rest, their radii times (1 - shrink) with
+    lost: the spheres between ``floor`` minus the largest radius and ``below`` [m] (the
+    heap: not those left in the funnel, nor those that ran off the platform, some of
+    which lie under it, on a platform's back face, where a scene may not start), at
+    rest, their radii times (1 - shrink) with
     shrink the largest pair overlap / (r_i + r_j) plus 5e-4 (doubled until no sphere
     starts overlapping a sphere, wall or object; at most 1 %), masses kept, a platform
     flat as LAMMPS's disc (as_lammps_disc)."""
-    keep = np.isfinite(x[:, 0]) & (x[:, 2] < below)
+    with np.errstate(invalid="ignore"):
+        keep = np.isfinite(x[:, 0]) & (x[:, 2] < below) & \
+            (x[:, 2] > floor - float(scene.radius.max()))
     x, radius = x[keep], scene.radius[keep]
     pair, _ = peer_lammps.largest_overlaps(x, radius, scene.box_lo, scene.box_hi)
     shrink = pair + 5e-4
@@ -201,7 +206,8 @@ def held_scene(scene, x, below=math.inf):
 def hold_run(a, scene, x, mu, mu_r, base) -> dict:
     """taichi_spheres run a.hold s from LAMMPS's final heap x (held_scene) with friction
     mu and rolling friction mu_r: tools/heap.py's result, and the shrink used."""
-    held, shrink = held_scene(scene, x, base.get("below", math.inf))
+    held, shrink = held_scene(scene, x, base.get("below", math.inf),
+                              base.get("floor", -math.inf))
     return dict(heap.run_heap(held, mu, mu_r, a.hold, 0.0, 1, base), shrink=shrink)
 
 
