@@ -239,8 +239,8 @@ def hold_text(rows, a) -> str:
         return ""
     shrink = max((r["shrink"] for r in rows if math.isfinite(r.get("shrink", math.nan))),
                  default=math.nan)
-    return (f" *taichi_spheres holding LAMMPS's heap*: LAMMPS's final spheres below the "
-            f"funnel, at rest, radii shrunk by at most {shrink:.1e} (no overlaps), run "
+    return (" *taichi_spheres holding LAMMPS's heap*: LAMMPS's final spheres on the "
+            f"platform, at rest, radii shrunk by at most {shrink:.1e} (no overlaps), run "
             f"{a.hold:g} s more with the same mu and mu_r.")
 
 
