@@ -223,6 +223,8 @@ def main(argv=None):
                    help="pour once per seed (default: once, the scene's own seeds)")
     p.add_argument("--write", action="store_true")
     p.add_argument("--no-write", dest="write", action="store_false")
+    p.add_argument("--section", default="heap",
+                   help="the docs/granular.md section --write replaces")
     a = p.parse_args(argv)
     base = dict(floor=a.base[0], below=a.below, centre=a.base[1:3], within=a.base[3])
     options = {k: v for k, v in (("step_fraction", a.step_fraction),
@@ -239,7 +241,7 @@ def main(argv=None):
                   os.path.relpath(a.scene, os.path.join(os.path.dirname(__file__), "..")))
     print(text)
     if a.write:
-        write_section(os.path.join(DOCS, "granular.md"), "heap", text)
+        write_section(os.path.join(DOCS, "granular.md"), a.section, text)
 
 
 if __name__ == "__main__":
