@@ -97,3 +97,13 @@ def test_a_lammps_heap_starts_without_overlaps_when_held():
     x[5] = [0.15, 0.15, 0.1]          # under the platform (its back face): not kept
     on_platform, _ = peer_lammps_heap.held_scene(scene, x, below=0.195, floor=0.14)
     assert np.array_equal(on_platform.x, x[[4]])
+
+
+def test_summary_table_has_a_column_per_key_and_none_for_single_pours():
+    rows = [dict(mu=0.3, mu_r=0.1, code=code, angle=a, base_angle=a, height=0.02)
+            for code in ("taichi_spheres", "LAMMPS") for a in (20.0, 22.0)]
+    lines = heap.summary_lines(rows, ("mu", "mu_r", "code"))
+    assert lines[3].split("|")[1:5] == [" mu ", " mu_r ", " code ", " pours "]
+    assert lines[4] == "|---" * 7 + "|"
+    assert lines[5].startswith("| 0.3 | 0.1 | taichi_spheres | 2 | 21.0 ± 1.4 (2) |")
+    assert heap.summary_lines(rows[:1]) == []

@@ -133,6 +133,26 @@ def summarise(rows, keys=("mu", "mu_r")) -> list:
     return out
 
 
+def summary_lines(rows, keys=("mu", "mu_r")) -> list:
+    """The markdown lines of the table of means ± standard deviations over the pours
+    (summarise by keys: mu, mu_r, then any other key as a column); [] when no (mu,
+    mu_r) was poured more than once."""
+    summary = summarise(rows, keys)
+    if not any(s["n"] > 1 for s in summary):
+        return []
+    head = "| " + " | ".join(keys) + " | pours | profile angle [deg] (fits) | " \
+        "fixed-base angle [deg] | heap height [mm] |"
+    lines = ["", "Mean ± standard deviation over the pours (profile angle over the pours it "
+                 "could fit):", "", head, "|---" * (len(keys) + 4) + "|"]
+    for s in summary:
+        cells = [f"{s[k]:g}" if isinstance(s[k], float) else str(s[k]) for k in keys]
+        lines.append("| " + " | ".join(cells) + f" | {s['n']} | "
+                     f"{mean_sd(s['angle'], s['angle_sd'])} ({s['fits']}) | "
+                     f"{mean_sd(s['base_angle'], s['base_angle_sd'])} | "
+                     f"{mean_sd(s['height'], s['height_sd'], 1e3)} |")
+    return lines
+
+
 def mean_sd(value, sd, scale=1.0, digits=1) -> str:
     """'value ± sd' (scaled) for a report; just the value where sd is nan."""
     if not math.isfinite(sd):
@@ -185,17 +205,7 @@ def report(rows, argv, threads, scene_path) -> str:
         lines.append(f"| {seed} | {r['mu']:g} | {r['mu_r']:g} | {r['angle']:.1f} | "
                      f"{r['base_angle']:.1f} | {1e3 * r['height']:.1f} | {r['time']:.2f} | "
                      f"{r['wall_seconds']:.0f} | {r['max_overlap']:.1e} |")
-    summary = summarise(rows)
-    if any(s["n"] > 1 for s in summary):
-        lines += ["", "Mean ± standard deviation over the pours (profile angle over the "
-                      "pours it could fit):", "",
-                  "| mu | mu_r | pours | profile angle [deg] (fits) | fixed-base angle [deg] | "
-                  "heap height [mm] |", "|---|---|---|---|---|---|"]
-        for s in summary:
-            lines.append(f"| {s['mu']:g} | {s['mu_r']:g} | {s['n']} | "
-                         f"{mean_sd(s['angle'], s['angle_sd'])} ({s['fits']}) | "
-                         f"{mean_sd(s['base_angle'], s['base_angle_sd'])} | "
-                         f"{mean_sd(s['height'], s['height_sd'], 1e3)} |")
+    lines += summary_lines(rows)
     return "\n".join(lines)
 
 

@@ -263,17 +263,7 @@ def report(rows, argv, a, scene, version) -> str:
         lines.append(f"| {seed} | {r['mu']:g} | {r['mu_r']:g} | {r['code']} | "
                      f"{r['angle']:.1f} | {r['base_angle']:.1f} | {1e3 * r['height']:.1f} | "
                      f"{r['wall']:.0f} |")
-    summary = heap.summarise(rows, ("mu", "mu_r", "code"))
-    if any(s["n"] > 1 for s in summary):
-        lines += ["", "Mean ± standard deviation over the seeds (profile angle over the runs "
-                      "it could fit):", "",
-                  "| mu | mu_r | code | runs | profile angle [deg] (fits) | fixed-base angle "
-                  "[deg] | height [mm] |", "|---|---|---|---|---|---|---|"]
-        for s in summary:
-            lines.append(f"| {s['mu']:g} | {s['mu_r']:g} | {s['code']} | {s['n']} | "
-                         f"{heap.mean_sd(s['angle'], s['angle_sd'])} ({s['fits']}) | "
-                         f"{heap.mean_sd(s['base_angle'], s['base_angle_sd'])} | "
-                         f"{heap.mean_sd(s['height'], s['height_sd'], 1e3)} |")
+    lines += heap.summary_lines(rows, ("mu", "mu_r", "code"))
     return "\n".join(lines)
 
 
