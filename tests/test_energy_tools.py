@@ -192,12 +192,28 @@ def test_direct_solve_of_a_stack_on_the_floor_is_exact():
     start = np.array([True, False])            # the pair row must join the active set
     lam, solves, seconds, fill, done = solver_convergence.active_set_solve(
         W, prob.linear, start, 0.0)
-    assert done and solves == 2 and len(seconds) == 2 and fill > 0
+    assert done == "yes" and solves == 2 and len(seconds) == 2 and fill >= 3
     assert lam == pytest.approx([6.0, 4.0])
     assert prob.velocities(lam) == pytest.approx(np.zeros((2, 3)))
     converged, warm = solver_convergence.direct_rows(prob, lam, np.zeros((2, 3)), [0.0])
     assert converged[0] == "converged" and warm[0] == "warm start"
-    assert converged[2:4] == (1, True) and converged[6]["max"] == pytest.approx(0.0, abs=1e-15)
+    assert converged[2:4] == (1, "yes") and converged[6]["max"] == pytest.approx(0.0, abs=1e-15)
     # no warm impulse: the floor row joins after the first (empty) solve, the pair row
     # after the second
-    assert warm[2:4] == (3, True) and warm[6]["max"] == pytest.approx(0.0, abs=1e-15)
+    assert warm[2:4] == (3, "yes") and warm[6]["max"] == pytest.approx(0.0, abs=1e-15)
+
+
+def test_direct_solve_reports_a_singular_block():
+    """Two identical rows (one sphere on the floor, counted twice) make W_AA exactly
+    singular without a compliance; with a compliance the solve converges, the impulse
+    split between the two rows."""
+    p = dict(a=np.array([0, 0]), b=np.array([-1, -1]), normal=np.array([[0, 0, 1.0]] * 2),
+             meff=np.array([1.0, 1.0]), target=np.zeros(2), lam=np.zeros(2),
+             v=np.array([[0, 0, -1.0]]), inv_mass=np.array([1.0]), order=np.array([0, 1]),
+             h=1e-3, d=1.0)
+    prob = solver_convergence.Problem(p)
+    W = solver_convergence.delassus(prob)
+    both = np.array([True, True])
+    assert solver_convergence.active_set_solve(W, prob.linear, both, 0.0)[4] == "singular"
+    lam, solves, _, _, done = solver_convergence.active_set_solve(W, prob.linear, both, 1e-9)
+    assert done == "yes" and lam.sum() == pytest.approx(1.0, rel=1e-6)

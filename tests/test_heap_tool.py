@@ -107,3 +107,16 @@ def test_summary_table_has_a_column_per_key_and_none_for_single_pours():
     assert lines[4] == "|---" * 7 + "|"
     assert lines[5].startswith("| 0.3 | 0.1 | taichi_spheres | 2 | 21.0 ± 1.4 (2) |")
     assert heap.summary_lines(rows[:1]) == []
+
+
+def test_a_held_sphere_pressed_into_the_platform_shrinks_more_or_is_refused():
+    import peer_lammps_heap
+    scene = heap.heap_scene(HEAP_SCENE)
+    r = float(scene.radius[0])
+    x = np.full((scene.n, 3), np.nan)
+    x[0] = [0.15, 0.15, 0.1395 + r * (1 - 2e-3)]     # 2e-3 r into LAMMPS's disc
+    held, shrink = peer_lammps_heap.held_scene(scene, x)
+    assert shrink == pytest.approx(4e-3)              # 5e-4 doubled three times
+    x[0, 2] = 0.1395 + 0.5 * r                        # half a radius in: not mended
+    with pytest.raises(ValueError, match="inside geometry"):
+        peer_lammps_heap.held_scene(scene, x)

@@ -113,15 +113,16 @@ def base_angle(base, height, radius) -> float:
 
 
 def summarise(rows, keys=("mu", "mu_r")) -> list:
-    """One dict per distinct ``keys`` of rows: the keys, pours n, and the mean and
-    standard deviation (ddof 1; nan for one pour) of angle (over the pours the profile
-    fit measured: fits), base_angle and height."""
+    """One dict per distinct ``keys`` of rows: the keys, pours n (those with a finite
+    height: a failed run has none), and the mean and standard deviation (ddof 1; nan
+    for one pour) of angle (over the pours the profile fit measured: fits), base_angle
+    and height."""
     groups: dict = {}
     for r in rows:
         groups.setdefault(tuple(r[k] for k in keys), []).append(r)
     out = []
     for key, group in groups.items():
-        s = dict(zip(keys, key), n=len(group))
+        s = dict(zip(keys, key), n=sum(math.isfinite(r["height"]) for r in group))
         for name in ("angle", "base_angle", "height"):
             v = np.array([r[name] for r in group], float)
             v = v[np.isfinite(v)]

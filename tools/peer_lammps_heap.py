@@ -197,8 +197,9 @@ def held_scene(scene, x, below=math.inf, floor=-math.inf):
             return scene.replace(x=x, v=np.zeros_like(x), radius=radius * (1 - shrink),
                                  mass=scene.mass[keep], omega=np.zeros_like(x),
                                  material=scene.material[keep], geometry=shapes), shrink
-        except ValueError:
-            if shrink > 0.01:
+        except ValueError as exc:       # only a start overlap is mended by shrinking
+            if "overlap" not in str(exc) and "inside geometry" not in str(exc) or \
+                    2 * shrink > 0.01:
                 raise
             shrink *= 2
 

@@ -322,32 +322,40 @@ def active_set_solve(W, q, active, eps, most=30) -> tuple:
     """The complementarity problem lambda >= 0, W lambda + q >= 0, lambda (W lambda + q)
     = 0 by active-set iterations from the rows ``active`` (bool): each solves (W_AA + eps
     I) lambda_A = -q_A by a sparse LU (SuperLU), drops the rows with lambda < 0 and adds
-    the inactive rows with W lambda + q < 0, until none changes or ``most`` solves.
-    Returns (lambda >= 0, solves, seconds of each factorization (none for an empty
-    active set), fill nnz(L + U) of the last, converged)."""
+    the inactive rows with W lambda + q < 0, until none changes, an active set comes
+    back (a cycle), the block is singular or ``most`` solves. Returns (lambda >= 0,
+    solves, seconds of each factorization (none for an empty active set), fill
+    nnz(L + U) of the last, outcome: "yes" (converged), "cycle", "singular" or "no")."""
     import scipy.sparse as sparse
     from scipy.sparse.linalg import splu
     active = active.copy()
-    seconds, fill = [], 0
+    seconds, fill, seen = [], 0, set()
+    lam = np.zeros(len(q))
     for solve in range(1, most + 1):
+        seen.add(active.tobytes())
         idx = np.flatnonzero(active)
         lam = np.zeros(len(q))
         if len(idx):                         # none active: lambda = 0, no factorization
             block = (W[idx][:, idx] + eps * sparse.eye(len(idx))).tocsc()
             t0 = time.perf_counter()
-            lu = splu(block, permc_spec="COLAMD")
+            try:
+                lu = splu(block, permc_spec="COLAMD")
+            except RuntimeError:             # exactly singular
+                return lam, solve, seconds, fill, "singular"
             seconds.append(time.perf_counter() - t0)
             fill = lu.L.nnz + lu.U.nnz
             lam[idx] = lu.solve(-q[idx])
         negative, violated = lam < 0, ~active & (W @ lam + q < 0)
         if not negative.any() and not violated.any():
-            return lam, solve, seconds, fill, True
+            return lam, solve, seconds, fill, "yes"
         active = (active & ~negative) | violated
-    return np.maximum(lam, 0.0), most, seconds, fill, False
+        if active.tobytes() in seen:
+            return np.maximum(lam, 0.0), solve, seconds, fill, "cycle"
+    return np.maximum(lam, 0.0), most, seconds, fill, "no"
 
 
 def direct_rows(prob: Problem, lam_true, truth, eps_list) -> list:
-    """(start, eps [relative to W's mean diagonal], solves, converged, median
+    """(start, eps [relative to W's mean diagonal], solves, outcome, median
     factorization seconds, fill, errors against truth) of active_set_solve for each eps,
     started from the converged solution's active set and from the warm start's (the
     rows with a warm impulse: what a solver knows before it solves)."""
@@ -377,7 +385,7 @@ def direct_report(p, lam_true, rows) -> list:
              "factorization [ms] | fill nnz(L+U) | largest velocity error [m/s] | rms [m/s] |",
              "|---|---|---|---|---|---|---|---|"]
     for start, eps, solves, done, seconds, fill, e in rows:
-        lines.append(f"| {start} | {eps:.0e} | {solves} | {'yes' if done else 'no'} | "
+        lines.append(f"| {start} | {eps:.0e} | {solves} | {done} | "
                      f"{1e3 * seconds:.0f} | {fill:,} | {e['max']:.1e} | {e['rms']:.1e} |")
     return lines
 
