@@ -62,6 +62,10 @@ def test_pours_from_other_seeds():
     assert np.array_equal(heap.heap_scene(HEAP_SCENE, 7).x, own.x)   # the file's own seed
     other = heap.heap_scene(HEAP_SCENE, 8)
     assert other.n == own.n and not np.array_equal(other.x, own.x)
+    flat = heap.heap_scene(HEAP_SCENE, flat=True)
+    lengths = [(g.inside, g.length) for g in flat.geometry if isinstance(g, ts.Cone)]
+    assert (False, 1e-6) in lengths and (False, 1e-3) not in lengths
+    assert np.array_equal(flat.x, own.x)
 
 
 def test_summary_over_pours_skips_heaps_the_fit_could_not_measure():

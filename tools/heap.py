@@ -23,6 +23,7 @@ and the standard deviation over the pours.
     python tools/heap.py                               # mu in 0.3 0.5 0.7, mu_r in 0 0.1
     python tools/heap.py --mu 0.5 --mu-r 0.1 --no-write
     python tools/heap.py --mu 0.3 0.6 --mu-r 0.1 --seeds 7 8 9
+    python tools/heap.py --mu 0.3 --mu-r 0.1 --flat-platform   # the platform as LAMMPS's disc
     python tools/heap.py --write                       # the 'heap' section of docs/granular.md
 """
 from __future__ import annotations
@@ -47,17 +48,38 @@ from taichi_spheres.scenefile import scene_from_dict  # noqa: E402
 from machine import cpu_name, write_section  # noqa: E402  (tools/machine.py)
 
 DOCS = os.path.join(os.path.dirname(__file__), "..", "docs")
+#: an outside cone shorter than this fraction of its radius is a platform, a disc in
+#: LAMMPS (tools/peer_lammps_heap.py)
+FLAT = 0.05
 
 
-def heap_scene(path, seed=None):
+def heap_scene(path, seed=None, flat=False):
     """The scene of the file at path; with seed (an int), its k-th [[pour]] table draws
-    from seed + k instead of its own seed."""
+    from seed + k instead of its own seed; with flat, its platforms flattened to
+    LAMMPS's discs (as_lammps_disc)."""
     with open(path, "rb") as fh:
         data = tomllib.load(fh)
     if seed is not None:
         for k, pour in enumerate(data.get("pour", [])):
             pour["seed"] = int(seed) + k
-    return scene_from_dict(data, source=str(path))
+    scene = scene_from_dict(data, source=str(path))
+    if flat:
+        scene = scene.replace(geometry=tuple(as_lammps_disc(g) for g in scene.geometry))
+    return scene
+
+
+def as_lammps_disc(g):
+    """Geometry object g, or where LAMMPS has a disc for it (lammps_region: a flat
+    outside cone along z) a cone 1 um tall about the disc's top (the cone's mean
+    height), so that spheres resting on LAMMPS's disc rest on it."""
+    if not isinstance(g, ts.Cone) or isinstance(g, ts.Cylinder) or g.inside or \
+            g.length >= FLAT * max(g.radius_at_point, g.radius_at_end):
+        return g
+    up = float(np.asarray(g.axis, float)[2])
+    top = float(g.point[2]) + 0.5 * up * g.length
+    point = np.array([g.point[0], g.point[1], top - 0.5 * up * 1e-6])
+    return ts.Cone(point, g.axis, g.radius_at_point, g.radius_at_end, 1e-6, inside=False,
+                   restitution=g.restitution, friction=g.friction)
 
 
 def fixed_base_angle(height, base_radius, diameter) -> float:
@@ -230,6 +252,9 @@ def main(argv=None):
                    help="largest move per step / smallest radius (default: the engine's)")
     p.add_argument("--iterations", type=int, default=None,
                    help="contact solver velocity sweeps per step at most (Rules)")
+    p.add_argument("--flat-platform", action="store_true",
+                   help="flatten the platform cone to LAMMPS's disc (a cone 1 um tall "
+                        "about its mean height), as tools/peer_lammps_heap.py's LAMMPS has it")
     p.add_argument("--seeds", type=int, nargs="+", default=[None],
                    help="pour once per seed (default: once, the scene's own seeds)")
     p.add_argument("--write", action="store_true")
@@ -242,7 +267,7 @@ def main(argv=None):
                                  ("contact_iterations", a.iterations)) if v}
     rows = []
     for seed in a.seeds:
-        scene = heap_scene(a.scene, seed)
+        scene = heap_scene(a.scene, seed, a.flat_platform)
         for mu in a.mu:
             for mu_r in a.mu_r:
                 rows.append(dict(run_heap(scene, mu, mu_r, a.duration, a.rest, a.threads,

@@ -63,8 +63,7 @@ import lammps_silo  # noqa: E402  (tools/lammps_silo.py)
 from machine import cpu_name, write_section  # noqa: E402
 
 DENSITY = 2500.0
-#: an outside cone shorter than this fraction of its radius becomes a disc in LAMMPS
-FLAT = 0.05
+FLAT = heap.FLAT
 
 
 def column_scene(a, seed=None):
@@ -161,21 +160,6 @@ def lammps_run(a, scene, mu, mu_r, base) -> dict:
                 x=x)
 
 
-def as_lammps_disc(g):
-    """Geometry object g, or where LAMMPS has a disc for it (lammps_region: a flat
-    outside cone along z) a cone 1 um tall about the disc's top (the cone's mean
-    height), so that spheres resting on LAMMPS's disc rest on it."""
-    import taichi_spheres as ts
-    if not isinstance(g, ts.Cone) or isinstance(g, ts.Cylinder) or g.inside or \
-            g.length >= FLAT * max(g.radius_at_point, g.radius_at_end):
-        return g
-    up = float(np.asarray(g.axis, float)[2])
-    top = float(g.point[2]) + 0.5 * up * g.length
-    point = np.array([g.point[0], g.point[1], top - 0.5 * up * 1e-6])
-    return ts.Cone(point, g.axis, g.radius_at_point, g.radius_at_end, 1e-6, inside=False,
-                   restitution=g.restitution, friction=g.friction)
-
-
 def held_scene(scene, x, below=math.inf, floor=-math.inf):
     """(scene, shrink) of LAMMPS's final positions x (N, 3) [m], nan for a sphere it
     lost: the spheres between ``floor`` minus the largest radius and ``below`` [m] (the
@@ -184,14 +168,14 @@ def held_scene(scene, x, below=math.inf, floor=-math.inf):
     rest, their radii times (1 - shrink) with
     shrink the largest pair overlap / (r_i + r_j) plus 5e-4 (doubled until no sphere
     starts overlapping a sphere, wall or object; at most 1 %), masses kept, a platform
-    flat as LAMMPS's disc (as_lammps_disc)."""
+    flat as LAMMPS's disc (tools/heap.py as_lammps_disc)."""
     with np.errstate(invalid="ignore"):
         keep = np.isfinite(x[:, 0]) & (x[:, 2] < below) & \
             (x[:, 2] > floor - float(scene.radius.max()))
     x, radius = x[keep], scene.radius[keep]
     pair, _ = peer_lammps.largest_overlaps(x, radius, scene.box_lo, scene.box_hi)
     shrink = pair + 5e-4
-    shapes = tuple(as_lammps_disc(g) for g in scene.geometry)
+    shapes = tuple(heap.as_lammps_disc(g) for g in scene.geometry)
     while True:
         try:
             return scene.replace(x=x, v=np.zeros_like(x), radius=radius * (1 - shrink),
