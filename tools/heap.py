@@ -57,12 +57,14 @@ def heap_scene(path, seed=None, flat=False):
     """The scene of the file at path; with seed (an int), its k-th [[pour]] table draws
     from seed + k instead of its own seed; with flat, its platforms flattened to
     LAMMPS's discs (as_lammps_disc)."""
-    with open(path, "rb") as fh:
-        data = tomllib.load(fh)
-    if seed is not None:
+    if seed is None:
+        scene = ts.load_scene(path)
+    else:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
         for k, pour in enumerate(data.get("pour", [])):
             pour["seed"] = int(seed) + k
-    scene = scene_from_dict(data, source=str(path))
+        scene = scene_from_dict(data, source=str(path))
     if flat:
         scene = scene.replace(geometry=tuple(as_lammps_disc(g) for g in scene.geometry))
     return scene

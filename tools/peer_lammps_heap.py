@@ -25,8 +25,8 @@ deviations per code.
 With ``--hold SECONDS``, taichi_spheres also starts from LAMMPS's final heap (the
 spheres on the platform, at rest, radii shrunk by the largest LAMMPS overlap plus
 5e-4 so that no two start overlapping, masses kept, the platform flattened to
-LAMMPS's disc) and runs it SECONDS more with the same mu and mu_r: whether it holds LAMMPS's heap (statics) or lets it slump, apart
-from how each code builds one (the pour's impacts).
+LAMMPS's disc) and runs it SECONDS more with the same mu and mu_r: whether it holds
+LAMMPS's heap (statics) or lets it slump, apart from how each code builds one.
 taichi_spheres: hard spheres, Walton impacts, the contact solver with Coulomb friction
 and rolling resistance (torque <= mu_r r_eff F_n). LAMMPS: tools/lammps_silo.py's
 contact model (Hertz, E = 5e9 Pa, nu = 0.3, damping from the restitution, Mindlin
@@ -63,7 +63,6 @@ import lammps_silo  # noqa: E402  (tools/lammps_silo.py)
 from machine import cpu_name, write_section  # noqa: E402
 
 DENSITY = 2500.0
-FLAT = heap.FLAT
 
 
 def column_scene(a, seed=None):
@@ -103,7 +102,7 @@ def lammps_region(k, g) -> str:
         raise ValueError(f"geometry[{k}]: {type(g).__name__} has no region here")
     z0, z1 = g.point[2], g.point[2] + axis[2] * g.length
     (lo, rlo), (hi, rhi) = sorted([(z0, r0), (z1, r1)])
-    if not g.inside and g.length < FLAT * max(r0, r1):
+    if not g.inside and g.length < heap.FLAT * max(r0, r1):
         # a flat cone (a platform): LAMMPS's cone contacts let spheres through so
         # shallow a surface; a disc at its mean height stands for it
         top = 0.5 * (lo + hi)

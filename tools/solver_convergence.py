@@ -44,7 +44,8 @@ rows (scipy.sparse), the rows the converged solution holds active (lambda > 0) s
 exactly, W_AA lambda_A = -(J v_free - target)_A, by a sparse LU factorization
 (SuperLU, scipy.sparse.linalg.splu), then the active set changed (rows with lambda < 0
 leave it, inactive rows that approach faster than their target join it) and solved
-again until no row violates either (an active-set method, at most 30 solves). W_AA is
+again until no row violates either, an active set comes back or 30 solves (an
+active-set method); from the rows with a warm impulse too. W_AA is
 near singular where the bed holds about as many contacts as degrees of freedom, so
 eps times W's mean diagonal is added to it (a compliance, as a soft constraint's).
 Reported per eps and start (the converged solution's active set, or the rows with a
@@ -308,7 +309,8 @@ def delassus(prob: Problem):
     import scipy.sparse as sparse
     p, n, N = prob.p, len(prob.a), prob.N
     rows = np.repeat(np.arange(n), 3)
-    on_a = sparse.csr_matrix((prob.n.ravel(), (rows, (3 * prob.a[:, None] + np.arange(3)).ravel())),
+    on_a = sparse.csr_matrix((prob.n.ravel(),
+                              (rows, (3 * prob.a[:, None] + np.arange(3)).ravel())),
                              shape=(n, 3 * N))
     pairs = np.flatnonzero(prob.pair)
     on_b = sparse.csr_matrix((prob.n[pairs].ravel(), (np.repeat(pairs, 3),
