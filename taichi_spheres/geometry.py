@@ -17,10 +17,12 @@ and the object's [m], negative when the sphere is inside it; the engine's kernel
   plane (t along the axis, rho from it) the segment (0, radius_at_point) - (length,
   radius_at_end). The gap is the signed distance to it minus r (positive on the axis
   side for ``inside``, on the far side otherwise) where the centre projects onto the
-  segment, else the distance to the nearer end rim minus r (a hopper's outlet edge):
-  spheres must start on the front side this gap measures. In the run a finite cone
-  is a shell with two faces: a sphere that goes round an open end to its back meets
-  the back face (surfaces.py).
+  segment, else the distance to the nearer end rim minus r (a hopper's outlet edge).
+  A finite cone is a shell with two faces, as in the run (surfaces.py): a sphere that
+  goes round an open end to its back meets the back face, and ``gap(..., both_faces=
+  True)`` measures that face there (|signed distance| - r). Starts are checked with
+  both faces (a sphere may start behind a finite shell, not across it); spheres the
+  package places itself (``random`` tables, recycled spheres) go on the front side.
 - :class:`Cylinder` ``(point, axis, radius, length=None, inside=True)``: a cone with
   both radii equal; ``length=None`` is infinite (no rims, and its back stays solid in
   the run); a finite one with ``inside=False`` is an open tube in the run.
@@ -118,8 +120,9 @@ class Plane:
         set_(self, "restitution", e)
         set_(self, "friction", mu)
 
-    def gap(self, x, r) -> np.ndarray:
-        """(N,) gaps [m] of spheres at x (N, 3) of radii r (N,)."""
+    def gap(self, x, r, both_faces=False) -> np.ndarray:
+        """(N,) gaps [m] of spheres at x (N, 3) of radii r (N,) (``both_faces``: no
+        effect, a plane has one face)."""
         x = np.atleast_2d(np.asarray(x, dtype=np.float64))
         r = np.broadcast_to(np.asarray(r, dtype=np.float64), (len(x),))
         z, rho = _radial(x - self.point, self.normal)
@@ -172,8 +175,10 @@ class Cone:
         set_(self, "restitution", e)
         set_(self, "friction", mu)
 
-    def gap(self, x, r) -> np.ndarray:
-        """(N,) gaps [m] of spheres at x (N, 3) of radii r (N,)."""
+    def gap(self, x, r, both_faces=False) -> np.ndarray:
+        """(N,) gaps [m] of spheres at x (N, 3) of radii r (N,): to the front face (the
+        side ``inside`` names), or with ``both_faces`` to the face on the centre's side
+        of a finite shell, as the run sees it (surfaces.py ``cone_gap``)."""
         x = np.atleast_2d(np.asarray(x, dtype=np.float64))
         r = np.broadcast_to(np.asarray(r, dtype=np.float64), (len(x),))
         t, rho = _radial(x - self.point, self.axis)
@@ -182,9 +187,10 @@ class Cone:
         span = float(np.hypot(*seg))
         along = (t * seg[0] + (rho - r0) * seg[1]) / span ** 2
         sign = 1.0 if self.inside else -1.0
-        signed = sign * (t * seg[1] - (rho - r0) * seg[0]) / span - r
+        side = sign * (t * seg[1] - (rho - r0) * seg[0]) / span
         if self.length is None:
-            return signed
+            return side - r
+        signed = (np.abs(side) if both_faces else side) - r
         end_t = np.where(along >= 1, self.length, 0.0)
         end_r = np.where(along >= 1, r1, r0)
         rim = np.hypot(t - end_t, rho - end_r) - r
@@ -299,10 +305,11 @@ def hole_problem(k, plane, lo, hi) -> str | None:
 
 
 def inside_problem(x, radius, geometry, tolerance) -> str | None:
-    """Why a sphere starts inside a geometry object (gap < -tolerance x radius), or
-    None: names the first such sphere and object."""
+    """Why a sphere starts inside a geometry object (gap < -tolerance x radius, with
+    both faces of a finite shell, as in the run), or None: names the first such sphere
+    and object."""
     for k, g in enumerate(geometry):
-        gap = g.gap(x, radius)
+        gap = g.gap(x, radius, both_faces=True)
         bad = np.flatnonzero(gap < -tolerance * radius)
         if bad.size:
             i = int(bad[0])

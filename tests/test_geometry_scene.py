@@ -100,7 +100,8 @@ def test_scene_geometry_packs_resolved_values():
     (dict(wall_friction=0.1, restitution_model="smid"), "smid"),
     (dict(geometry=[ts.Plane((0, 0, 0), (0, 0, 1), friction=0.1)], restitution_model="smid"),
      "smid"),
-    (dict(geometry=[ts.Cone((0.5, 0.5, 0.3), (0, 0, 1), 0.1, 0.4, 0.6, inside=False)]),
+    (dict(x=((0.69, 0.5, 0.5), (0.2, 0.2, 0.2)),      # across the cone's surface
+          geometry=[ts.Cone((0.5, 0.5, 0.3), (0, 0, 1), 0.1, 0.4, 0.6, inside=False)]),
      "sphere 0 starts inside geometry\\[0\\] \\(Cone\\): gap"),
     (dict(geometry=[ts.Plane((0, 0, 0), (0, 0, 1)),
                     ts.Plane((0.5, 0.5, 0.6), (0, 0, 1), hole=0.04)]),
@@ -121,6 +122,32 @@ def test_touching_geometry_is_accepted_and_periodic_axes_allowed():
     gaps = [g.gap(s.x, s.radius) for g in s.geometry]
     assert gaps[0][0] == pytest.approx(0.0) and gaps[1][1] == pytest.approx(0.0, abs=1e-15)
     assert s.periodic == (True, True, False)
+
+
+#: a platform cone 0.1 m tall (apex up, inside=False: spheres rest on its outside)
+PLATFORM = ts.Cone((0.5, 0.5, 0.2), (0, 0, 1), 0.3, 0.0, 0.1, inside=False)
+
+
+def test_a_start_behind_a_finite_shell_is_accepted_and_one_across_it_refused():
+    """A finite cone or cylinder has two faces in the run (surfaces.py), so a start
+    behind it (under the platform, outside a finite tube) is a start like any other;
+    one whose sphere crosses either face is refused, naming the sphere."""
+    under = (0.5, 0.5, 0.1)                      # below the platform: behind its shell
+    s = _scene(x=((0.2, 0.2, 0.6), under), geometry=[PLATFORM])
+    assert PLATFORM.gap(s.x, s.radius)[1] < -0.05                 # the front side: inside
+    assert PLATFORM.gap(s.x, s.radius, both_faces=True)[1] > 0    # the run's face: clear
+    tube = ts.Cylinder((0.5, 0.5, 0.3), (0, 0, 1), 0.2, length=0.4)
+    assert _scene(x=((0.1, 0.1, 0.5), (0.5, 0.5, 0.5)), geometry=[tube]).n == 2
+    with pytest.raises(ValueError, match="sphere 1 starts inside geometry\\[0\\] \\(Cone\\)"):
+        _scene(x=((0.2, 0.2, 0.6), (0.65, 0.5, 0.22)), geometry=[PLATFORM])  # across the slope
+    with pytest.raises(ValueError, match="sphere 0 starts inside geometry\\[0\\] \\(Cylinder\\)"):
+        _scene(x=((0.72, 0.5, 0.5), (0.5, 0.5, 0.5)), geometry=[tube])       # across the tube
+
+
+def test_an_infinite_cylinder_keeps_its_solid_back_at_the_start():
+    pillar = ts.Cylinder((0.5, 0.5, 0.0), (0, 0, 1), 0.1, inside=False)
+    with pytest.raises(ValueError, match="sphere 0 starts inside geometry\\[0\\]"):
+        _scene(geometry=[pillar])
 
 
 def test_omega_stored_as_float64_array():

@@ -137,6 +137,24 @@ def test_scene_from_gsd_continues_a_run(tmp_path):
     assert again.meta["initial"]["time"] == pytest.approx(0.1)
 
 
+def test_a_frame_with_spheres_behind_a_finite_shell_starts_a_new_scene(tmp_path):
+    """A sphere that went under a platform cone (its back face) in a run is where the
+    run may put it: the frame starts a new scene with the same geometry."""
+    platform = ts.Cone((0.5, 0.5, 0.3), (0, 0, 1), 0.3, 0.0, 0.1, inside=False)
+    x = np.array([[0.5, 0.5, 0.6], [0.5, 0.5, 0.15], [0.2, 0.2, 0.1]])
+    scene = ts.Scene.from_arrays(x, np.zeros_like(x), 0.05, gravity=(0, 0, -9.81),
+                                 geometry=[platform])
+    sim = ts.Simulation(scene)
+    sim.advance(0.05)
+    with ts.GSDWriter(tmp_path / "heap.gsd") as writer:
+        writer.append(sim)
+    again = ts.scene_from_gsd(tmp_path / "heap.gsd", gravity=scene.gravity,
+                              geometry=[platform])
+    np.testing.assert_allclose(again.x, sim.state().x, rtol=0, atol=1e-15)  # box-centred
+    assert platform.gap(again.x[1:2], 0.05)[0] < 0 < platform.gap(again.x[1:2], 0.05,
+                                                                   both_faces=True)[0]
+
+
 def test_frames_of_other_tools_use_the_hoomd_box(tmp_path):
     """A HOOMD file without our log: box centred at the origin, periodic, default mass."""
     frame = gsd_hoomd.Frame()

@@ -163,8 +163,7 @@ def held_scene(scene, x, below=math.inf, floor=-math.inf):
     """(scene, shrink) of LAMMPS's final positions x (N, 3) [m], nan for a sphere it
     lost: the spheres between ``floor`` minus the largest radius and ``below`` [m] (the
     heap: not those left in the funnel, nor those that ran off the platform, some of
-    which lie under it, on a platform's back face, where a scene may not start), at
-    rest, their radii times (1 - shrink) with
+    which lie under it), at rest, their radii times (1 - shrink) with
     shrink the largest pair overlap / (r_i + r_j) plus 5e-4 (doubled until no sphere
     starts overlapping a sphere, wall or object; at most 1 %), masses kept, a platform
     flat as LAMMPS's disc (tools/heap.py as_lammps_disc)."""
