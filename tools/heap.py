@@ -24,6 +24,7 @@ and the standard deviation over the pours.
     python tools/heap.py --mu 0.5 --mu-r 0.1 --no-write
     python tools/heap.py --mu 0.3 0.6 --mu-r 0.1 --seeds 7 8 9
     python tools/heap.py --mu 0.3 --mu-r 0.1 --flat-platform   # the platform as LAMMPS's disc
+    python tools/heap.py --mu 0.3 --mu-r 0.1 --beta0 0.4       # Walton's beta0 in impacts
     python tools/heap.py --write                       # the 'heap' section of docs/granular.md
 """
 from __future__ import annotations
@@ -257,6 +258,9 @@ def main(argv=None):
     p.add_argument("--flat-platform", action="store_true",
                    help="flatten the platform cone to LAMMPS's disc (a cone 1 um tall "
                         "about its mean height), as tools/peer_lammps_heap.py's LAMMPS has it")
+    p.add_argument("--beta0", type=float, default=None,
+                   help="tangential restitution of impacts, Walton's beta0 in [-1, 1] "
+                        "(default: the scene's)")
     p.add_argument("--seeds", type=int, nargs="+", default=[None],
                    help="pour once per seed (default: once, the scene's own seeds)")
     p.add_argument("--write", action="store_true")
@@ -270,6 +274,8 @@ def main(argv=None):
     rows = []
     for seed in a.seeds:
         scene = heap_scene(a.scene, seed, a.flat_platform)
+        if a.beta0 is not None:
+            scene = scene.replace(tangential_restitution=a.beta0)
         for mu in a.mu:
             for mu_r in a.mu_r:
                 rows.append(dict(run_heap(scene, mu, mu_r, a.duration, a.rest, a.threads,
