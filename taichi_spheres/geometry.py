@@ -22,7 +22,8 @@ and the object's [m], negative when the sphere is inside it; the engine's kernel
   goes round an open end to its back meets the back face, and ``gap(..., both_faces=
   True)`` measures that face there (|signed distance| - r). Starts are checked with
   both faces (a sphere may start behind a finite shell, not across it); spheres the
-  package places itself (``random`` tables, recycled spheres) go on the front side.
+  package places itself (``[[pour]]`` and ``[[random]]`` tables, recycled spheres) go
+  on the front side.
 - :class:`Cylinder` ``(point, axis, radius, length=None, inside=True)``: a cone with
   both radii equal; ``length=None`` is infinite (no rims, and its back stays solid in
   the run); a finite one with ``inside=False`` is an open tube in the run.
