@@ -18,9 +18,9 @@ Gap and normal of a sphere (centre x, radius r) to an object, as in geometry.py:
   rim distance to minus the distance to the surface where the centre starts to
   project onto the segment, and the sphere would be pushed through the shell). A
   sphere pressed more than r through a face therefore comes out on the back. An
-  infinite cylinder keeps its solid back (the outside for ``inside``); so does
-  geometry.py's numpy gap, with which a scene's spheres are checked to start on the
-  front (``inside``) side.
+  infinite cylinder keeps its solid back (the outside for ``inside``). geometry.py's
+  numpy gap with ``both_faces=True`` is this gap (the start check); without it, the
+  front (``inside``) side's, where the package places spheres.
 The normal points from the surface to the sphere's centre.
 
 Impacts (exact rewind, as for the walls and pairs): a sphere that ends a step past a

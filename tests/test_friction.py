@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+import taichi as ti
 
 import taichi_spheres as ts
 from taichi_spheres import observe
@@ -320,6 +321,39 @@ def test_a_sphere_behind_a_finite_cone_meets_its_back_face(arch, case):
     assert sides - {0} == {behind}                      # and stayed behind the shell
     assert closest > -1e-4 * 2 * r
     assert float(np.dot(sim.state().v[0], kick)) > 0    # sent back by the back face
+
+
+#: shells whose numpy gap with both faces must equal the kernels' (surface_gap): a
+#: platform cone, a tilted hopper, finite tubes inside and outside, an infinite tube
+GAP_SHELLS = [ts.Cone((0.5, 0.5, 0.3), (0, 0, 1), 0.3, 0.0, 0.1, inside=False),
+              ts.Cone((0.5, 0.5, 0.3), (0, 0.6, 0.8), 0.05, 0.3, 0.3),
+              ts.Cylinder((0.5, 0.5, 0.2), (0, 0, 1), 0.2, length=0.4),
+              ts.Cylinder((0.5, 0.5, 0.2), (0, 0, 1), 0.2, length=0.4, inside=False),
+              ts.Cylinder((0.5, 0.5, 0.2), (1, 0, 0), 0.2)]
+
+
+@pytest.mark.parametrize("k", range(len(GAP_SHELLS)))
+def test_the_start_check_sees_the_gap_the_kernels_see(arch, k):
+    """Cone.gap(both_faces=True), the start check's gap, is the kernels' gap (two faces
+    of a finite shell, a solid back of an infinite tube) at random points."""
+    shape = GAP_SHELLS[k]
+    start = [0.5, 0.5, 0.25] if shape.length is None else [0.05, 0.05, 0.9]
+    scene = ts.Scene.from_arrays(np.array([start]), np.zeros((1, 3)), 0.01, geometry=[shape])
+    motion = ts.Simulation(scene, arch=arch, precision="f64").debug_view().motion
+    pts = np.random.default_rng(k).uniform(0, 1, (2000, 3))
+    r = 0.02
+    xs = ti.Vector.ndarray(3, ti.f64, len(pts))
+    xs.from_numpy(pts)
+    out = ti.ndarray(ti.f64, len(pts))
+
+    @ti.kernel
+    def kernel_gaps(xs: ti.types.ndarray(), out: ti.types.ndarray()):
+        for i in range(out.shape[0]):
+            out[i] = motion.surface_gap(0, xs[i], ti.cast(r, ti.f64))[0]
+
+    kernel_gaps(xs, out)
+    both = shape.gap(pts, np.full(len(pts), r), both_faces=True)
+    assert np.abs(out.to_numpy() - both).max() < 1e-12
 
 
 def test_recycled_spheres_reenter_at_the_top(arch):

@@ -28,7 +28,7 @@ def test_lammps_impact_has_its_restitution_and_meets_walton_when_sliding():
                               vn=0.5, dt=5e-6)
     slide = lammps_walton.wall_impact(lammps, a, 0.3, 0.0, 10.0)
     assert slide["e"] == pytest.approx(0.5, abs=0.01)
-    # a sign error in the contact point's velocity would put beta near +1 or -1 - 2 x 0.35
+    # a sign error in the spin term would give beta = -1 - 1.5 / psi (-1.15 here)
     assert slide["beta"] == pytest.approx(lammps_walton.walton_beta(10.0), abs=0.05)
     stick = lammps_walton.wall_impact(lammps, a, 0.3, 0.0, 0.5)
     assert abs(stick["beta"]) < 0.1                  # the contact point nearly stops

@@ -51,9 +51,10 @@ def wall_impact(lammps, a, mu, mu_r, psi) -> dict:
     ut = psi * mu * (1 + a.e) * a.vn
     steps = int(math.ceil(20 * r / a.vn / a.dt))          # in, out and 18 radii away
     reach = 0.1 + 2 * ut * steps * a.dt                   # the box holds its whole path
+    top = 0.1 + 2 * r + 2 * a.vn * steps * a.dt
     lmp = lammps_silo.create_system(lammps, np.array([[0.0, 0.0, r * (1 + 1e-6)]]),
                                     np.array([r]), np.array([m]), (-reach, -0.1, 0.0),
-                                    (reach, 0.1, 0.1), a.dt, 1)
+                                    (reach, 0.1, top), a.dt, 1)
     lmp.command("unfix grav")
     roll = lammps_silo.rolling_defaults(np.array([r]), np.array([m]), a.dt)
     model = lammps_silo.contact_model(a.young, a.poisson, a.e, mu, mu_r, roll, r)
@@ -80,7 +81,7 @@ def walton_beta(psi, beta0=0.0) -> float:
 def report(rows, argv, a) -> str:
     """Markdown table of the impacts (docs/granular.md section 'lammps-walton')."""
     lines = [f"Measured {datetime.date.today()} on {cpu_name()}: "
-             f"`python tools/lammps_walton.py {' '.join(argv)}`".rstrip(), "",
+             f"`{' '.join(['python tools/lammps_walton.py'] + list(argv))}`", "",
              f"One sphere (r = {1e3 * a.radius:g} mm, {a.density:g} kg/m^3) meets a LAMMPS "
              f"wall/gran plane at v_n = {a.vn:g} m/s (E = {a.young:g} Pa, nu = {a.poisson:g}, "
              f"e = {a.e:g}, Mindlin friction, dt = {a.dt:g} s, no gravity); psi = u_t / "
