@@ -140,8 +140,12 @@ class SphereState:
             loaded) at the last solve (ContactSolver.mark_near; stepping.py)
         omega: (N,) vec3 real, only with features.friction — angular velocity [rad/s]
         material: (N,) i32, only with features.materials — material index (materials.py)
+        inv_inertia: (N,) real, only with features.friction and radii or masses that
+            differ — 1/I of each sphere [1/(kg m^2)] (set where masses load)
         n_spheres: () i32 — spheres of the bound scene
         r0, m0: () real — the radius [m] and mass [kg] of every sphere when equal
+        inv_m0, inv_i0: () real — 1/m0 [1/kg] and, with friction, 1/I of a sphere of
+            radius r0 and mass m0 [1/(kg m^2)]: kept, not divided in each row update
     """
 
     def __init__(self, capacity: int, features: Features, real):
@@ -159,9 +163,15 @@ class SphereState:
         self.near = ti.field(ti.i32, shape=capacity) if features.contacts else None
         self.omega = ti.Vector.field(3, real, shape=capacity) if features.friction else None
         self.material = ti.field(ti.i32, shape=capacity) if features.materials else None
+        self.per_sphere_inertia = features.friction and not (features.equal_radii
+                                                             and features.equal_masses)
+        self.inv_inertia = (ti.field(real, shape=capacity) if self.per_sphere_inertia
+                            else None)
         self.n_spheres = ti.field(ti.i32, shape=())
         self.r0 = ti.field(real, shape=())
         self.m0 = ti.field(real, shape=())
+        self.inv_m0 = ti.field(real, shape=())
+        self.inv_i0 = ti.field(real, shape=())
         np_real = np.float64 if real == ti.f64 else np.float32
 
         @ti.kernel
@@ -180,6 +190,8 @@ class SphereState:
                     self.radius[i] = radius[i]
                 if ti.static(not features.equal_masses):
                     self.inv_mass[i] = inv_mass[i]
+                if ti.static(self.per_sphere_inertia):
+                    self.inv_inertia[i] = self.solid_inv_inertia(self.mass_of(i), self.rad(i))
 
         @ti.kernel
         def read_rows(x: ti.types.ndarray(dtype=real, ndim=2),
@@ -206,11 +218,24 @@ class SphereState:
         self.n_spheres[None] = scene.n
         self.r0[None] = float(scene.radius[0])
         self.m0[None] = float(scene.mass[0])
+        self.set_uniform_inverses()
         self.load(x, v, scene.radius, scene.mass, omega)
         if self.features.materials:
             index = np.zeros(self.capacity, dtype=np.int32)
             index[:scene.n] = scene.material
             self.material.from_numpy(index)
+
+    @ti.kernel
+    def set_uniform_inverses(self):
+        """inv_m0 = 1/m0 and inv_i0 = 1/I(m0, r0), in the fields' precision, as a row
+        update would divide them (same bits)."""
+        self.inv_m0[None] = 1 / self.m0[None]
+        self.inv_i0[None] = self.solid_inv_inertia(self.m0[None], self.r0[None])
+
+    @ti.func
+    def solid_inv_inertia(self, m, r):
+        """1/I of a solid sphere of mass m [kg] and radius r [m], I = 2/5 m r^2."""
+        return ti.cast(2.5, self.real) / (m * r * r)
 
     def load(self, x, v, radius, mass, omega=None):
         """Positions [m], velocities [m/s], radii [m], masses [kg] and spins [rad/s] (None:
@@ -270,9 +295,12 @@ class SphereState:
 
     @ti.func
     def inv_inertia_of(self, i):
-        """1/I of sphere i, I = 2/5 m r^2 (solid sphere) [1/(kg m^2)]."""
-        r = self.rad(i)
-        return ti.cast(2.5, self.real) / (self.mass_of(i) * r * r)
+        """1/I of sphere i, I = 2/5 m r^2 (solid sphere) [1/(kg m^2)]; kept, not
+        divided (inv_i0 when radii and masses are equal)."""
+        out = self.inv_i0[None]
+        if ti.static(self.per_sphere_inertia):
+            out = self.inv_inertia[i]
+        return out
 
     @ti.func
     def spin(self, i):

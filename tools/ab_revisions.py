@@ -21,6 +21,14 @@ more steps.
     python tools/ab_revisions.py HEAD~1 HEAD --n 10000 --rounds 5
     python tools/ab_revisions.py HEAD~1 HEAD --pour-bed --rounds 5
     python tools/ab_revisions.py HEAD~1 HEAD --pour-bed --pour-seeds 8 --rounds 1
+    python tools/ab_revisions.py HEAD~1 HEAD --silo --rounds 2
+
+With ``--silo`` the measure is the frictional silo of tools/kernel_profile.py --silo
+(tools/peer_lammps_silo.py's 1,722 spheres, mu = 0.5, settled, 0.2 s into the
+discharge): each revision's run times the same ``--window`` s (default 0.1) of the
+discharge ``--repeats`` times from one checkpoint (after an untimed pass), 1 thread,
+and reports the fastest wall ms per step. Two revisions that keep the same bits run the
+same steps, so the ratio of ms per step is the ratio of their costs.
 """
 from __future__ import annotations
 
@@ -82,6 +90,37 @@ print("bed", runs * (t_end - t_start) / wall, int(steps), wall / steps)
 """
 
 
+#: --silo: run in a revision's worktree; argv: window [s], repeats
+SILO = """
+import sys, time
+sys.path.insert(0, "tools")
+import kernel_profile
+from machine import untimed_pass
+window, repeats = float(sys.argv[1]), int(sys.argv[2])
+sim = kernel_profile.silo_simulation()
+untimed_pass(sim, lambda s: s.advance(window))
+start = sim.checkpoint()
+times = []
+for _ in range(repeats):
+    sim.restore(start)
+    s0, t0 = sim.stats["steps"], time.perf_counter()
+    sim.advance(window)
+    times.append((time.perf_counter() - t0) / (sim.stats["steps"] - s0))
+print("silo", min(times), sim.stats["steps"] - s0)
+"""
+
+
+def silo_cost(tree: str, window: float, repeats: int) -> tuple:
+    """(fastest wall s per step, steps) of ``window`` s of the silo's discharge with the
+    package of the revision checked out in ``tree``."""
+    out = subprocess.run([sys.executable, "-c", SILO, str(window), str(repeats)],
+                         capture_output=True, text=True, check=True, cwd=tree)
+    match = re.search(r"^silo ([0-9.e+-]+) ([0-9]+)$", out.stdout, re.M)
+    if not match:
+        raise RuntimeError(f"no silo line in the run's output:\n{out.stdout[-2000:]}")
+    return float(match.group(1)), int(match.group(2))
+
+
 def bed_speed(tree: str, seeds: int = 0) -> tuple:
     """(simulated s per wall s, steps, wall s per step) of the pour's bed with the
     package of the revision checked out in ``tree``: [1, 1.5] s of scenes/pour.toml,
@@ -115,6 +154,32 @@ def report(args, runs, beds, unit) -> None:
               f"(range {min(per_step):.3f}-{max(per_step):.3f})")
 
 
+def silo_main(args) -> int:
+    """--silo: alternate the two revisions' silo runs; print ms per step and the
+    per-round ratios B / A."""
+    where = tempfile.mkdtemp(prefix="ab_revisions_")
+    trees, runs = {}, {args.rev_a: [], args.rev_b: []}
+    try:
+        for rev in (args.rev_a, args.rev_b):
+            trees[rev] = checkout(rev, where)
+        for k in range(args.rounds):
+            for rev in (args.rev_a, args.rev_b):
+                per_step, steps = silo_cost(trees[rev], args.window, args.repeats)
+                runs[rev].append(per_step)
+                print(f"round {k + 1} {rev}: {per_step * 1e3:.2f} ms per step "
+                      f"(fastest of {args.repeats}, {steps} steps)", flush=True)
+    finally:
+        for tree in trees.values():
+            subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", tree],
+                           capture_output=True)
+        shutil.rmtree(where, ignore_errors=True)
+    a, b = args.rev_a, args.rev_b
+    ratios = [y / x for x, y in zip(runs[a], runs[b])]
+    print(f"{b} / {a}: wall per step median {statistics.median(ratios):.3f} "
+          f"(range {min(ratios):.3f}-{max(ratios):.3f}; < 1: {b} is faster)")
+    return 0
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("rev_a")
@@ -126,9 +191,19 @@ def main(argv=None):
                    help="measure the pour's bed (simulated s per wall s) instead")
     p.add_argument("--pour-seeds", type=int, default=0, metavar="K",
                    help="with --pour-bed: K fills (seed 1..K), each over [1, 2] s")
+    p.add_argument("--silo", action="store_true",
+                   help="measure the frictional silo's discharge (wall ms per step)")
+    p.add_argument("--window", type=float, default=0.1, help="with --silo: seconds timed")
+    p.add_argument("--repeats", type=int, default=5, help="with --silo: timed windows")
     args = p.parse_args(argv)
     if args.pour_seeds < 0 or (args.pour_seeds and not args.pour_bed):
         p.error("--pour-seeds takes a count >= 0 and needs --pour-bed")
+    if args.silo and args.pour_bed:
+        p.error("give --silo or --pour-bed, not both")
+    if args.window <= 0 or args.repeats < 1:
+        p.error("--window takes seconds > 0 and --repeats a count >= 1")
+    if args.silo:
+        return silo_main(args)
     unit = "simulated s per wall s (pour bed, 1 thread)" if args.pour_bed else \
         "sphere-steps/s"
     where = tempfile.mkdtemp(prefix="ab_revisions_")

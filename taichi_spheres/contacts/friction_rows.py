@@ -36,34 +36,42 @@ class FrictionRows:
 
     @ti.func
     def row_friction(self, s):
-        """Friction coefficient of row s: the pair value (of the two spheres'
-        materials), the wall value, or the geometry object's (params.geo column 13)."""
-        b = self.row_b[s]
-        out = ti.cast(0, self.real)
-        if b >= 0:
-            out = self.params.friction_of(self.state.material_of(self.row_a[s]),
-                                          self.state.material_of(b))
-        else:
-            wall = -1 - b
-            out = self.params.mu_wall[None]
-            if wall >= GEOMETRY_ROWS:
-                out = self.params.geo[wall - GEOMETRY_ROWS, 13]
-        return out
+        """Friction coefficient of row s (kept by keep_row_coefficients)."""
+        return self.row_mu[s]
 
     @ti.func
     def rolling_limit(self, s):
-        """mu_r r_eff lambda_n of row s [N m s] (on a wall: sphere a's material's
-        mu_r)."""
+        """mu_r r_eff lambda_n of row s [N m s] (mu_r r_eff kept by
+        keep_row_coefficients)."""
+        return self.row_roll[s] * self.lam[s]
+
+    @ti.func
+    def keep_row_coefficients(self, s):
+        """Keep row s's friction coefficient (the pair value of the two spheres'
+        materials, the wall value, or the geometry object's: params.geo column 13) and,
+        with rolling friction, mu_r r_eff [m] (r_eff = r_a r_b / (r_a + r_b); on a
+        wall r_a and sphere a's material's mu_r), so that no row update divides or
+        looks them up."""
         a = self.row_a[s]
         b = self.row_b[s]
-        r = self.state.rad(a)
         ma = self.state.material_of(a)
-        mb = ma
+        mu = ti.cast(0, self.real)
         if b >= 0:
-            rb = self.state.rad(b)
-            r = r * rb / (r + rb)
-            mb = self.state.material_of(b)
-        return self.params.rolling_of(ma, mb) * r * self.lam[s]
+            mu = self.params.friction_of(ma, self.state.material_of(b))
+        else:
+            wall = -1 - b
+            mu = self.params.mu_wall[None]
+            if wall >= GEOMETRY_ROWS:
+                mu = self.params.geo[wall - GEOMETRY_ROWS, 13]
+        self.row_mu[s] = mu
+        if ti.static(self.f.rolling):
+            r = self.state.rad(a)
+            mb = ma
+            if b >= 0:
+                rb = self.state.rad(b)
+                r = r * rb / (r + rb)
+                mb = self.state.material_of(b)
+            self.row_roll[s] = self.params.rolling_of(ma, mb) * r
 
     @ti.func
     def clamped(self, vec, limit):

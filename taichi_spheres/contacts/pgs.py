@@ -27,7 +27,7 @@ class GaussSeidel:
     @ti.func
     def inv_mass(self, i):
         """1/m of sphere i [1/kg]."""
-        out = 1 / self.state.m0[None]
+        out = self.state.inv_m0[None]
         if ti.static(not self.f.equal_masses):
             out = self.state.inv_mass_of(i)
         return out

@@ -296,6 +296,7 @@ class ContactRows:
             self.lam[s] = 0
             if ti.static(self.f.friction):
                 self.lam_t[s] = ti.Vector.zero(self.real, 3)
+                self.keep_row_coefficients(s)
             if ti.static(self.f.rolling):
                 self.lam_r[s] = ti.Vector.zero(self.real, 3)
             if ti.static(self.rules.warm_start):

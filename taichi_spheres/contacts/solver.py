@@ -87,6 +87,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         lam_t: (K,) vec3, only with friction — accumulated tangential impulse on a [N s]
         lam_r: (K,) vec3, only with rolling friction — accumulated rolling angular
             impulse on a [N m s]
+        row_mu: (K,) real, only with friction — the row's friction coefficient;
+        row_roll: (K,) real, only with rolling friction — its mu_r r_eff [m]
+            (friction_rows.py keep_row_coefficients)
         cell_count, cell_fill: (M,) i32, cell_start: (M+1,) i32 — rows per owner cell
         v_pre, w: (N,) vec3 — velocities before the solve, pseudo-velocities [m/s]
         unrowed: (N,) i32 — 1 for a sphere with an impact to come and no row for it
@@ -167,6 +170,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         friction, rolling = self.f.friction, self.f.rolling
         self.lam_t = ti.Vector.field(3, real, shape=k) if friction else None
         self.lam_r = ti.Vector.field(3, real, shape=k) if rolling else None
+        self.row_mu = ti.field(real, shape=k) if friction else None
+        self.row_roll = ti.field(real, shape=k) if rolling else None
         self.w_pre = ti.Vector.field(3, real, shape=cap) if friction else None
         self.warm_t = ti.Vector.field(3, real, shape=(cap, slots)) if friction else None
         self.warm_r = ti.Vector.field(3, real, shape=(cap, slots)) if rolling else None
