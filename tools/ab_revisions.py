@@ -107,6 +107,7 @@ for _ in range(repeats):
     sim.advance(window)
     times.append((time.perf_counter() - t0) / (sim.stats["steps"] - s0))
 print("silo", min(times), sim.stats["steps"] - s0)
+print("windows", *times)
 """
 
 
@@ -118,6 +119,8 @@ def silo_cost(tree: str, window: float, repeats: int) -> tuple:
     match = re.search(r"^silo ([0-9.e+-]+) ([0-9]+)$", out.stdout, re.M)
     if not match:
         raise RuntimeError(f"no silo line in the run's output:\n{out.stdout[-2000:]}")
+    windows = re.search(r"^windows (.*)$", out.stdout, re.M).group(1).split()
+    print("  windows [ms per step]: " + " ".join(f"{1e3 * float(w):.2f}" for w in windows))
     return float(match.group(1)), int(match.group(2))
 
 

@@ -74,17 +74,19 @@ def rolling_defaults(radius, mass, dt) -> tuple:
     return k, 2 * 0.5 * math.sqrt(k * m_rot)
 
 
-def contact_model(young, poisson, e, mu, mu_roll, roll, r_eff) -> str:
+def contact_model(young, poisson, e, mu, mu_roll, roll, r_eff, twisting=True) -> str:
     """pair_coeff / wall/gran model text (SI): Hertz from Young's modulus [Pa] and
     Poisson ratio, restitution e, Mindlin friction mu; with mu_roll > 0 sds rolling
-    (roll = (k [N/m], gamma [N s/m])) and sds twisting limited to mu_roll r_eff [m] F_n."""
+    (roll = (k [N/m], gamma [N s/m])) and, unless ``twisting`` is False, sds twisting
+    limited to mu_roll r_eff [m] F_n."""
     text = (f"hertz/material {young:.10g} {e:.10g} {poisson:.10g} damping coeff_restitution "
             f"tangential mindlin NULL 1.0 {mu:.10g}")
     if mu_roll > 0:
         k, gamma = roll
-        k_tw, g_tw = k * r_eff ** 2, gamma * r_eff ** 2     # [N m], [N m s]
-        text += (f" rolling sds {k:.10g} {gamma:.10g} {mu_roll:.10g}"
-                 f" twisting sds {k_tw:.10g} {g_tw:.10g} {mu_roll * r_eff:.10g}")
+        text += f" rolling sds {k:.10g} {gamma:.10g} {mu_roll:.10g}"
+        if twisting:
+            k_tw, g_tw = k * r_eff ** 2, gamma * r_eff ** 2     # [N m], [N m s]
+            text += f" twisting sds {k_tw:.10g} {g_tw:.10g} {mu_roll * r_eff:.10g}"
     return text
 
 

@@ -37,6 +37,8 @@ process beside taichi_spheres, one thread each (a machine with two cores or more
     python tools/peer_lammps_heap.py --mu 0.3 0.6 --mu-r 0.1
     python tools/peer_lammps_heap.py --mu 0.3 0.6 --mu-r 0.1 --seed 7 8 9
     python tools/peer_lammps_heap.py --mu 0.6 --hold 1.0
+    python tools/peer_lammps_heap.py --mu 0.3 --codes lammps --roll-stiffness 0.1
+    python tools/peer_lammps_heap.py --mu 0.3 --codes lammps --no-twisting
     python tools/peer_lammps_heap.py --setup column --count 1500 --duration 1.5
     python tools/peer_lammps_heap.py --write        # the 'peer-heap' section of docs/granular.md
 """
@@ -125,7 +127,9 @@ def lammps_run(a, scene, mu, mu_r, base) -> dict:
     """Angle, height and wall seconds of LAMMPS from the scene's spheres and geometry."""
     lammps = lammps_silo.import_lammps()
     n = scene.n
-    roll = lammps_silo.rolling_defaults(scene.radius, scene.mass, a.dt)
+    k, gamma = lammps_silo.rolling_defaults(scene.radius, scene.mass, a.dt)
+    # a stiffer or softer spring at the same damping ratio (gamma ~ sqrt(k))
+    roll = (k * a.roll_stiffness, gamma * math.sqrt(a.roll_stiffness))
     pad = np.full(3, 4 * float(scene.radius.max()))   # room for LAMMPS's bins
     lmp = lammps_silo.create_system(lammps, scene.x, scene.radius, scene.mass,
                                     scene.box_lo - pad, scene.box_hi + pad, a.dt, 1)
@@ -135,8 +139,9 @@ def lammps_run(a, scene, mu, mu_r, base) -> dict:
     r = float(scene.radius.mean())
     lmp.command("pair_style granular")
     lmp.command("pair_coeff * * " + lammps_silo.contact_model(
-        a.young, 0.3, scene.restitution, mu, mu_r, roll, r / 2))
-    wall = lammps_silo.contact_model(a.young, 0.3, scene.wall_restitution, mu, mu_r, roll, r)
+        a.young, 0.3, scene.restitution, mu, mu_r, roll, r / 2, a.twisting))
+    wall = lammps_silo.contact_model(a.young, 0.3, scene.wall_restitution, mu, mu_r, roll, r,
+                                     a.twisting)
     for k, axis in enumerate("xyz"):
         lmp.command(f"fix wall_{axis} all wall/gran granular {wall} {axis}plane "
                     f"{scene.box_lo[k]:.10g} {scene.box_hi[k]:.10g}")
@@ -227,6 +232,18 @@ def hold_text(rows, a) -> str:
             f"{a.hold:g} s more with the same mu and mu_r.")
 
 
+def spring_text(a) -> str:
+    """The report's sentence on LAMMPS's rolling and twisting settings when not the
+    defaults ('' otherwise)."""
+    parts = []
+    if a.roll_stiffness != 1.0:
+        parts.append(f"rolling and twisting springs {a.roll_stiffness:g} times "
+                     "lammps_silo.rolling_defaults' (same damping ratio)")
+    if not a.twisting:
+        parts.append("no twisting resistance")
+    return f" LAMMPS: {', '.join(parts)}." if parts else ""
+
+
 def report(rows, argv, a, scene, version) -> str:
     """Markdown tables of the runs and, over several seeds, the mean ± standard deviation
     per code (docs/granular.md section 'peer-heap')."""
@@ -238,7 +255,7 @@ def report(rows, argv, a, scene, version) -> str:
              f"after {a.duration:g} s. {version}: E = {a.young:g} Pa, nu = 0.3, "
              f"dt = {a.dt:g} s. Profile angle: a line through the surface profile between "
              "20 % and 80 % of the heap's height; fixed-base angle: atan((H - d) / R) on "
-             "the platform of radius R." + hold_text(rows, a), "",
+             "the platform of radius R." + spring_text(a) + hold_text(rows, a), "",
              "| seed | mu | mu_r | code | profile angle [deg] | fixed-base angle [deg] | "
              "height [mm] | wall s |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -271,10 +288,17 @@ def main(argv=None):
     p.add_argument("--codes", nargs="+", default=["taichi_spheres", "lammps"])
     p.add_argument("--hold", type=float, default=0.0, help="also run taichi_spheres this "
                    "long [s] from LAMMPS's final heap (0: not)")
+    p.add_argument("--roll-stiffness", type=float, default=1.0, metavar="F",
+                   help="LAMMPS's rolling (and twisting) spring F times "
+                        "lammps_silo.rolling_defaults', same damping ratio")
+    p.add_argument("--no-twisting", dest="twisting", action="store_false",
+                   help="LAMMPS without twisting resistance")
     p.add_argument("--write", action="store_true")
     p.add_argument("--section", default="peer-heap",
                    help="the docs/granular.md section --write replaces")
     a = p.parse_args(argv)
+    if a.roll_stiffness <= 0:
+        p.error("--roll-stiffness takes a factor > 0")
     rows, version = [], "LAMMPS"
     # LAMMPS runs in a second process beside taichi_spheres (one core each)
     context = multiprocessing.get_context("spawn")
