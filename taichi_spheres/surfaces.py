@@ -213,7 +213,7 @@ class Surfaces:
                 loss += ti.cast(1 / 7, self.real) * m * (ut.norm_sqr() - after.norm_sqr())
                 dv += p / m
                 if ti.static(self.f.rolling):
-                    self.surface_rolling(i, r, -(1 + e) * un * m)
+                    self.surface_rolling(i, r, n, -(1 + e) * un * m)
             self.state.x[i] += dv * s
             self.state.v[i] = v + dv
             self.state.moved[i] += dv.norm() * s

@@ -219,18 +219,18 @@ class Motion(Surfaces):
         ti.atomic_add(self.params.energy_wall_restitution[None],
                       ti.cast(1 / 7, self.real) * m * (ut.norm_sqr() - after.norm_sqr()))
         if ti.static(self.f.rolling):
-            self.surface_rolling(i, r, m * jn)
+            self.surface_rolling(i, r, n, m * jn)
         return x + dv * s, v + dv, moved + dv.norm() * s
 
     @ti.func
-    def surface_rolling(self, i, r, jn):
+    def surface_rolling(self, i, r, n, jn):
         """Rolling resistance of an impact of sphere i (radius r [m]) on a wall or
-        geometry surface with normal impulse jn [N s] (contacts/friction.py; mu_r: the
+        geometry surface with normal n and normal impulse jn [N s] (contacts/friction.py; mu_r: the
         sphere's material's); the energy goes to params.energy_wall_restitution."""
         inv_i = self.state.inv_inertia_of(i)
         w = self.state.omega[i]
         m = self.state.material_of(i)
-        p = rolling_impulse(w, inv_i, ti.cast(0, self.real),
+        p = rolling_impulse(w, inv_i, ti.cast(0, self.real), n,
                             self.params.rolling_of(m, m) * r * jn)
         self.state.omega[i] += inv_i * p
         ti.atomic_add(self.params.energy_wall_restitution[None],

@@ -95,6 +95,27 @@ def test_sliding_sphere_rolls_at_five_sevenths(arch, precision, relaxation):
 
 
 @pytest.mark.parametrize("precision, relaxation", CLOSED_FORM_RUNS, indirect=["precision"])
+def test_rolling_and_twisting_resistance_act_each_in_full(arch, precision, relaxation):
+    """A sphere rolling on the floor (v0, omega_y = v0 / r) while spinning about the
+    vertical: the rolling resistance and the twisting resistance are each a torque of
+    mu_r r m g (bounded each on its own, as LAMMPS and Project Chrono bound them), so
+    it rolls with a = -5/7 mu_r g and its twist slows by 5/2 mu_r g / r, as if the
+    other were absent."""
+    r, mu, mu_r, v0, twist = 0.02, 0.5, 0.05, 0.5, 20.0
+    sc = _one([0.2, 0.5, r], [v0, 0, 0], r, omega=[0, v0 / r, twist],
+              box=((0, 0, 0), (2, 1, 1)), restitution=0.5, wall_restitution=0.5,
+              friction=mu, rolling_friction=mu_r)
+    sim = ts.Simulation(sc, arch=arch, precision=precision,
+                        tuning=Tuning().with_(relaxation=relaxation))
+    sim.advance(0.2)
+    st = sim.state()
+    rel = closed_form_tolerance(max(1e-9, tol(precision, 4096)), relaxation)
+    assert st.v[0, 0] == pytest.approx(v0 - 5 / 7 * mu_r * G * st.time, rel=rel)
+    assert st.omega[0, 2] == pytest.approx(twist - 2.5 * mu_r * G / r * st.time, rel=rel)
+    assert st.omega[0, 1] * r == pytest.approx(st.v[0, 0], rel=rel)     # still rolling
+
+
+@pytest.mark.parametrize("precision, relaxation", CLOSED_FORM_RUNS, indirect=["precision"])
 @pytest.mark.parametrize("degrees", [20.0, 60.0])
 def test_sphere_on_incline(arch, precision, degrees, relaxation):
     """A sphere released on a plane tilted by theta: rolls with a = 5/7 g sin(theta) when
@@ -392,13 +413,17 @@ def test_checkpoint_after_a_discharge_and_an_empty_simulation(arch):
     assert abs(budget["unaccounted"]) < 1e-12 * budget["initial"]
 
 
-def _rolling_step(w1, w2, inv1, inv2, limit):
-    """Closed form of the impact's rolling resistance (contacts/friction.py)."""
-    rel = w1 - w2
-    p = -rel / (inv1 + inv2)
-    size = np.linalg.norm(p)
+def _rolling_step(w1, w2, inv1, inv2, n, limit):
+    """Closed form of the impact's rolling resistance (contacts/friction.py): the
+    impulse that stops the relative spin, its rolling part (about the tangent plane)
+    and its twisting part (about the normal n) each bounded by limit."""
+    p = -(w1 - w2) / (inv1 + inv2)
+    twist = p @ n
+    roll = p - twist * n
+    size = np.linalg.norm(roll)
     if size > limit:
-        p *= limit / size
+        roll *= limit / size
+    p = roll + np.clip(twist, -limit, limit) * n
     return w1 + inv1 * p, w2 - inv2 * p
 
 
@@ -419,7 +444,8 @@ def test_pair_impact_with_rolling_friction(arch, w1):
     meff = m[0] * m[1] / m.sum()
     jn = (1 + e) * meff * abs((v[0] - v[1]) @ n)
     inv = 1 / (0.4 * m * r ** 2)
-    w_a, w_b = _rolling_step(want[2], want[3], inv[0], inv[1], mu_r * r.prod() / r.sum() * jn)
+    w_a, w_b = _rolling_step(want[2], want[3], inv[0], inv[1], n,
+                             mu_r * r.prod() / r.sum() * jn)
     assert_impact(st, v, r, want[:2], (w_a, w_b))
     l0 = observe.angular_momentum(before)
     assert np.abs(observe.angular_momentum(st) - l0).max() < 1e-12 * np.abs(l0).max()
@@ -443,7 +469,7 @@ def test_wall_impact_with_rolling_friction(arch):
     want = walton_impact(v, np.zeros(3), w0, np.zeros(3), r, 0.0, m, math.inf,
                          np.array([0.0, 0.0, 1.0]), e, mu, beta0)
     w_a, _ = _rolling_step(want[2], np.zeros(3), 1 / (0.4 * m * r * r), 0.0,
-                           mu_r * r * (1 + e) * m * 1.0)
+                           np.array([0.0, 0.0, 1.0]), mu_r * r * (1 + e) * m * 1.0)
     assert sim.stats["wall_collisions"] == 1
     assert np.abs(st.v[0] - want[0]).max() < 1e-13
     assert np.abs(st.omega[0] - w_a).max() * r < 1e-13

@@ -24,10 +24,11 @@ The impulse acts at the contact point, so the angular momentum of the pair about
 is conserved, and it never adds energy (|beta| <= 1).
 
 Rolling resistance at impacts (rolling friction mu_r > 0): after Walton's impulse, an
-angular impulse P_r on a (-P_r on b) opposes the relative spin w_a - w_b (rolling and
-twisting alike, as the contact solver's rolling rows), up to stopping it, bounded by
-``mu_r r_eff J_n`` (r_eff = r_a r_b / (r_a + r_b), r_a on a wall): the impulse of a
-rolling torque bounded by mu_r r_eff times the normal force, over the impact. Equal
+angular impulse P_r on a (-P_r on b) opposes the relative spin w_a - w_b, up to
+stopping it; its rolling part (about the tangent plane) and its twisting part (about
+n) are each bounded by ``mu_r r_eff J_n`` (r_eff = r_a r_b / (r_a + r_b), r_a on a
+wall), as the contact solver's rolling rows: the impulse of a rolling torque and of a
+twisting torque each bounded by mu_r r_eff times the normal force, over the impact. Equal
 and opposite on the pair, it conserves their angular momentum; it only removes
 energy.
 """
@@ -65,15 +66,28 @@ def walton_impulse(ut, jn, meff, mu, beta_max):
 
 
 @ti.func
-def rolling_impulse(rel_spin, inv_ia, inv_ib, limit):
+def rolling_bounded(vec, n, limit):
+    """An angular impulse vec [N m s] bounded as rolling and twisting resistance: its
+    part about the tangent plane (rolling) shortened to ``limit`` if longer, its part
+    about the normal n (twisting) likewise, each on its own (LAMMPS's rolling and
+    twisting models, Project Chrono's rolling and spinning friction). The inverse
+    inertias are scalars, so this is the nearest bounded impulse in the energy's
+    metric: it never adds energy."""
+    twist = vec.dot(n)
+    roll = vec - twist * n
+    size = roll.norm()
+    if size > limit:
+        roll *= limit / size
+    return roll + ti.min(ti.max(twist, -limit), limit) * n
+
+
+@ti.func
+def rolling_impulse(rel_spin, inv_ia, inv_ib, n, limit):
     """Angular impulse [N m s] on sphere a opposing the relative spin rel_spin = w_a -
     w_b [rad/s] (module docstring): the one that stops it, -rel_spin / (1/I_a + 1/I_b),
-    shortened to ``limit`` (mu_r r_eff J_n) if longer; inv_ib = 0 for a wall."""
-    out = rel_spin / (inv_ia + inv_ib) * -1
-    size = out.norm()
-    if size > limit:
-        out *= limit / size
-    return out
+    bounded by ``limit`` (mu_r r_eff J_n) in rolling and in twisting about the normal
+    n (rolling_bounded); inv_ib = 0 for a wall."""
+    return rolling_bounded(rel_spin / (inv_ia + inv_ib) * -1, n, limit)
 
 
 @ti.func

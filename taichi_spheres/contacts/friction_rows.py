@@ -10,13 +10,14 @@ Each contact row s (normal n, accumulated normal impulse lambda_n) carries
   ``|lam_t| <= mu lambda_n`` (Coulomb; isotropic, so the result does not depend on a
   choice of tangent axes);
 - with rolling friction mu_r, an angular impulse lam_r driving the relative spin
-  ``w_a - w_b`` to zero, clamped to ``|lam_r| <= mu_r r_eff lambda_n`` (r_eff = r_a r_b
-  / (r_a + r_b), r_a on a wall): the torque of a rolling resistance bounded by mu_r
-  r_eff times the normal force (Zhou et al. 1999's constant-torque model, in impulse
-  form). It resists rolling (spin about a tangent) and twisting (spin about the
-  normal) alike, as Project Chrono's rolling and spinning friction with equal
-  coefficients: otherwise a grain spinning about the vertical on a floor, which no
-  tangential force slows, would spin for ever.
+  ``w_a - w_b`` to zero, its rolling part (about the tangent plane) and its twisting
+  part (about the normal) each clamped to ``mu_r r_eff lambda_n`` (r_eff = r_a r_b /
+  (r_a + r_b), r_a on a wall; friction.py rolling_bounded): the torques of a rolling
+  and a twisting resistance each bounded by mu_r r_eff times the normal force (Zhou et
+  al. 1999's constant-torque model, in impulse form), as LAMMPS's rolling and twisting
+  models and Project Chrono's rolling and spinning friction with equal coefficients.
+  Twisting is resisted too: otherwise a grain spinning about the vertical on a floor,
+  which no tangential force slows, would spin for ever.
 Friction is solved before the normal row in each sweep (Box2D's order: the normal row,
 which prevents overlap, has the last word).
 
@@ -25,7 +26,8 @@ A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 
 import taichi as ti
 
-from .friction import TANGENTIAL_MASS, contact_velocity, spin_change, tangential_part
+from .friction import (TANGENTIAL_MASS, contact_velocity, rolling_bounded, spin_change,
+                       tangential_part)
 
 #: wall rows 0..5 are the box's walls (2 x axis + side), from 6 on geometry objects
 GEOMETRY_ROWS = 6
@@ -138,7 +140,7 @@ class FrictionRows:
             wrel = wrel - self.state.omega[b]
             k += self.state.inv_inertia_of(b)
         old = self.lam_r[s]
-        new = self.clamped(old - wrel / k, self.rolling_limit(s))
+        new = rolling_bounded(old - wrel / k, self.normal[s], self.rolling_limit(s))
         self.lam_r[s] = new
         self.push_rolling(a, b, new - old)
         return (new - old).norm() * k * self.state.rad(a)

@@ -162,19 +162,19 @@ class PairRule:
         ti.atomic_add(self.params.energy_pair_restitution[None],
                       ti.cast(1 / 7, self.real) * meff * (ut.norm_sqr() - after.norm_sqr()))
         if ti.static(self.f.rolling):
-            self.impact_rolling(i, j, ri, rj, meff * jn_speed)
+            self.impact_rolling(i, j, ri, rj, n, meff * jn_speed)
         return dvi + wi / meff * p, dvj - wj / meff * p
 
     @ti.func
-    def impact_rolling(self, i, j, ri, rj, jn):
-        """Rolling resistance of the impact of (i, j) with normal impulse jn [N s]
+    def impact_rolling(self, i, j, ri, rj, n, jn):
+        """Rolling resistance of the impact of (i, j) with normal n and normal impulse jn [N s]
         (contacts/friction.py): both spins change, the energy goes to
         params.energy_pair_restitution."""
         inv_i = self.state.inv_inertia_of(i)
         inv_j = self.state.inv_inertia_of(j)
         rel = self.state.omega[i] - self.state.omega[j]
         mu_r = self.params.rolling_of(self.state.material_of(i), self.state.material_of(j))
-        p = rolling_impulse(rel, inv_i, inv_j, mu_r * ri * rj / (ri + rj) * jn)
+        p = rolling_impulse(rel, inv_i, inv_j, n, mu_r * ri * rj / (ri + rj) * jn)
         self.state.omega[i] += inv_i * p
         self.state.omega[j] -= inv_j * p
         ti.atomic_add(self.params.energy_pair_restitution[None],

@@ -8,7 +8,7 @@ A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 import taichi as ti
 
 from ..grid import FORWARD_ROWS
-from .friction import tangential_part
+from .friction import rolling_bounded, tangential_part
 from .friction_rows import GEOMETRY_ROWS
 
 
@@ -242,7 +242,8 @@ class ContactRows:
                 self.lam_t[s] = self.clamped(tangential_part(self.warm_t[a, t], n) * scale,
                                              self.row_friction(s) * self.lam[s])
                 if ti.static(self.f.rolling):
-                    self.lam_r[s] = self.clamped(self.warm_r[a, t] * scale, self.rolling_limit(s))
+                    self.lam_r[s] = rolling_bounded(self.warm_r[a, t] * scale, n,
+                                                    self.rolling_limit(s))
 
     @ti.func
     def inert_impact_row(self, s, n, gap):
