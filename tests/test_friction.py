@@ -430,9 +430,9 @@ def _rolling_step(w1, w2, inv1, inv2, n, limit):
 @pytest.mark.parametrize("w1", [(0, 40, -10), (0, 4000, -1000)])
 def test_pair_impact_with_rolling_friction(arch, w1):
     """With rolling friction mu_r an impact is Walton's, then an angular impulse opposing
-    the relative spin bounded by mu_r r_eff J_n (stopping it when small: first case;
-    limited: second): spins as that closed form, angular momentum conserved, energy
-    removed."""
+    the relative spin, its rolling and twisting parts each bounded by mu_r r_eff J_n
+    (stopping it when small: first case; limited: second): spins as that closed form,
+    angular momentum conserved, energy removed."""
     e, mu, mu_r, beta0 = 0.5, 0.3, 0.2, 0.35
     sim, (v, w, r, m, n) = oblique_pair(w1, arch, restitution=e, friction=mu,
                                         tangential_restitution=beta0, rolling_friction=mu_r)
@@ -455,8 +455,9 @@ def test_pair_impact_with_rolling_friction(arch, w1):
 
 
 def test_wall_impact_with_rolling_friction(arch):
-    """A spinning sphere hitting the floor: Walton's impact, then its spin reduced by
-    at most mu_r r J_n / I (the sphere's material's mu_r)."""
+    """A spinning sphere hitting the floor: Walton's impact, then its rolling spin and
+    its twist (about the vertical) each reduced by at most mu_r r J_n / I (the sphere's
+    material's mu_r; both bounds act here)."""
     e, mu, mu_r, beta0, r = 0.9, 0.2, 0.1, 0.4, 0.01
     v = np.array([0.7, -0.2, -1.0])
     w0 = np.array([0.0, -300.0, 50.0])

@@ -124,3 +124,19 @@ def test_a_held_sphere_pressed_into_the_platform_shrinks_more_or_is_refused():
     x[0, 2] = 0.1395 + 0.5 * r                        # half a radius in: not mended
     with pytest.raises(ValueError, match="inside geometry"):
         peer_lammps_heap.held_scene(scene, x)
+
+
+def test_lammps_contact_model_text_names_twisting_only_when_asked():
+    """tools/lammps_silo.py contact_model: sds rolling with mu_r > 0, sds twisting
+    limited to mu_r r_eff unless twisting=False (peer_lammps_heap.py --no-twisting),
+    neither without rolling friction."""
+    import lammps_silo
+    roll = (2.0, 0.1)
+    both = lammps_silo.contact_model(5e9, 0.3, 0.5, 0.3, 0.1, roll, 0.003)
+    assert "rolling sds 2 0.1 0.1" in both
+    assert both.endswith(f"twisting sds {2.0 * 0.003 ** 2:.10g} {0.1 * 0.003 ** 2:.10g} "
+                         f"{0.1 * 0.003:.10g}")
+    rolling_only = lammps_silo.contact_model(5e9, 0.3, 0.5, 0.3, 0.1, roll, 0.003,
+                                             twisting=False)
+    assert "rolling sds" in rolling_only and "twisting" not in rolling_only
+    assert "rolling" not in lammps_silo.contact_model(5e9, 0.3, 0.5, 0.3, 0.0, roll, 0.003)

@@ -33,6 +33,7 @@ same steps, so the ratio of ms per step is the ratio of their costs.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import re
 import shutil
@@ -161,22 +162,25 @@ def silo_main(args) -> int:
     """--silo: alternate the two revisions' silo runs; print ms per step and the
     per-round ratios B / A."""
     where = tempfile.mkdtemp(prefix="ab_revisions_")
-    trees, runs = {}, {args.rev_a: [], args.rev_b: []}
+    trees, runs, steps = {}, {args.rev_a: [], args.rev_b: []}, {}
     try:
         for rev in (args.rev_a, args.rev_b):
             trees[rev] = checkout(rev, where)
         for k in range(args.rounds):
             for rev in (args.rev_a, args.rev_b):
-                per_step, steps = silo_cost(trees[rev], args.window, args.repeats)
+                per_step, steps[rev] = silo_cost(trees[rev], args.window, args.repeats)
                 runs[rev].append(per_step)
                 print(f"round {k + 1} {rev}: {per_step * 1e3:.2f} ms per step "
-                      f"(fastest of {args.repeats}, {steps} steps)", flush=True)
+                      f"(fastest of {args.repeats}, {steps[rev]} steps)", flush=True)
     finally:
         for tree in trees.values():
             subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", tree],
                            capture_output=True)
         shutil.rmtree(where, ignore_errors=True)
     a, b = args.rev_a, args.rev_b
+    if len({s for s in steps.values()}) > 1:
+        print(f"warning: the revisions ran different steps ({steps}): they do not keep "
+              "the same bits, so the ratio mixes cost per step with trajectory")
     ratios = [y / x for x, y in zip(runs[a], runs[b])]
     print(f"{b} / {a}: wall per step median {statistics.median(ratios):.3f} "
           f"(range {min(ratios):.3f}-{max(ratios):.3f}; < 1: {b} is faster)")
@@ -196,16 +200,22 @@ def main(argv=None):
                    help="with --pour-bed: K fills (seed 1..K), each over [1, 2] s")
     p.add_argument("--silo", action="store_true",
                    help="measure the frictional silo's discharge (wall ms per step)")
-    p.add_argument("--window", type=float, default=0.1, help="with --silo: seconds timed")
-    p.add_argument("--repeats", type=int, default=5, help="with --silo: timed windows")
+    p.add_argument("--window", type=float, default=None,
+                   help="with --silo: seconds timed (default 0.1)")
+    p.add_argument("--repeats", type=int, default=None,
+                   help="with --silo: timed windows (default 5)")
     args = p.parse_args(argv)
     if args.pour_seeds < 0 or (args.pour_seeds and not args.pour_bed):
         p.error("--pour-seeds takes a count >= 0 and needs --pour-bed")
     if args.silo and args.pour_bed:
         p.error("give --silo or --pour-bed, not both")
-    if args.window <= 0 or args.repeats < 1:
-        p.error("--window takes seconds > 0 and --repeats a count >= 1")
+    if not args.silo and (args.window is not None or args.repeats is not None):
+        p.error("--window and --repeats need --silo")
     if args.silo:
+        args.window = 0.1 if args.window is None else args.window
+        args.repeats = 5 if args.repeats is None else args.repeats
+        if not (math.isfinite(args.window) and args.window > 0) or args.repeats < 1:
+            p.error("--window takes seconds > 0 and --repeats a count >= 1")
         return silo_main(args)
     unit = "simulated s per wall s (pour bed, 1 thread)" if args.pour_bed else \
         "sphere-steps/s"

@@ -297,8 +297,8 @@ def main(argv=None):
     p.add_argument("--section", default="peer-heap",
                    help="the docs/granular.md section --write replaces")
     a = p.parse_args(argv)
-    if a.roll_stiffness <= 0:
-        p.error("--roll-stiffness takes a factor > 0")
+    if not (math.isfinite(a.roll_stiffness) and a.roll_stiffness > 0):
+        p.error("--roll-stiffness takes a finite factor > 0")
     rows, version = [], "LAMMPS"
     # LAMMPS runs in a second process beside taichi_spheres (one core each)
     context = multiprocessing.get_context("spawn")
