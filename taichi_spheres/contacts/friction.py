@@ -66,6 +66,16 @@ def walton_impulse(ut, jn, meff, mu, beta_max):
 
 
 @ti.func
+def clamped(vec, limit):
+    """vec scaled down to length limit (>= 0) if longer."""
+    size = vec.norm()
+    out = vec
+    if size > limit:
+        out = vec * (limit / size)
+    return out
+
+
+@ti.func
 def rolling_bounded(vec, n, limit):
     """An angular impulse vec [N m s] bounded as rolling and twisting resistance: its
     part about the tangent plane (rolling) shortened to ``limit`` if longer, its part
@@ -74,11 +84,7 @@ def rolling_bounded(vec, n, limit):
     inertias are scalars, so this is the nearest bounded impulse in the energy's
     metric: it never adds energy."""
     twist = vec.dot(n)
-    roll = vec - twist * n
-    size = roll.norm()
-    if size > limit:
-        roll *= limit / size
-    return roll + ti.min(ti.max(twist, -limit), limit) * n
+    return clamped(vec - twist * n, limit) + ti.min(ti.max(twist, -limit), limit) * n
 
 
 @ti.func

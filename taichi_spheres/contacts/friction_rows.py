@@ -26,8 +26,8 @@ A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 
 import taichi as ti
 
-from .friction import (TANGENTIAL_MASS, contact_velocity, rolling_bounded, spin_change,
-                       tangential_part)
+from .friction import (TANGENTIAL_MASS, clamped, contact_velocity, rolling_bounded,
+                       spin_change, tangential_part)
 
 #: wall rows 0..5 are the box's walls (2 x axis + side), from 6 on geometry objects
 GEOMETRY_ROWS = 6
@@ -76,15 +76,6 @@ class FrictionRows:
             self.row_roll[s] = self.params.rolling_of(ma, mb) * r
 
     @ti.func
-    def clamped(self, vec, limit):
-        """vec scaled down to length limit (>= 0) if longer."""
-        size = vec.norm()
-        out = vec
-        if size > limit:
-            out = vec * (limit / size)
-        return out
-
-    @ti.func
     def push_tangent(self, a, b, n, impulse):
         """Apply a tangential impulse [N s] on a at the contact (-impulse on b); plain
         stores, not atomics (GaussSeidel.push)."""
@@ -123,7 +114,7 @@ class FrictionRows:
                                               self.state.rad(a), rb, n), n)
         mt = ti.static(TANGENTIAL_MASS) * self.meff[s]
         old = self.lam_t[s]
-        new = self.clamped(old - mt * ut, self.row_friction(s) * self.lam[s])
+        new = clamped(old - mt * ut, self.row_friction(s) * self.lam[s])
         self.lam_t[s] = new
         self.push_tangent(a, b, n, new - old)
         return (new - old).norm() / mt

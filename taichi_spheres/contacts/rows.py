@@ -8,7 +8,7 @@ A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 import taichi as ti
 
 from ..grid import FORWARD_ROWS
-from .friction import rolling_bounded, tangential_part
+from .friction import clamped, rolling_bounded, tangential_part
 from .friction_rows import GEOMETRY_ROWS
 
 
@@ -239,8 +239,8 @@ class ContactRows:
             self.lam[s] = self.warm_lam[a, t] * scale
             if ti.static(self.f.friction):
                 n = self.normal[s]
-                self.lam_t[s] = self.clamped(tangential_part(self.warm_t[a, t], n) * scale,
-                                             self.row_friction(s) * self.lam[s])
+                self.lam_t[s] = clamped(tangential_part(self.warm_t[a, t], n) * scale,
+                                        self.row_friction(s) * self.lam[s])
                 if ti.static(self.f.rolling):
                     self.lam_r[s] = rolling_bounded(self.warm_r[a, t] * scale, n,
                                                     self.rolling_limit(s))
