@@ -72,7 +72,10 @@ def test_contact_solver_options_that_do_not_go_together(capsys, argv, words):
 @pytest.mark.parametrize("argv, words", [
     (["--silo", "--arch", "cuda"], "--silo runs on the CPU in f64"),
     (["--gas", "100", "--silo"], "give one of"),
-    (["--gas", "-5"], "--gas must be a positive"),
+    (["--gas", "-5"], "take a positive sphere count"),
+    (["--silo-large", "-5"], "take a positive sphere count"),
+    (["--silo-large", "1000", "--silo"], "give one of"),
+    (["--silo-large", "1000", "--precision", "f32"], "--silo-large runs in f64"),
 ])
 def test_kernel_profile_options_that_do_not_go_together(capsys, argv, words):
     with pytest.raises(SystemExit):

@@ -4,7 +4,9 @@
 #   bench  tools/bench.py --arch cuda (gas throughput, f64 and f32)     -> DIR/bench_cuda.md
 #   beds   tools/contact_solver.py --beds-only --arch cuda (10^5 FCC bed) -> docs/bench.md
 #   silo   tools/silo_large.py --arch cuda (10^5-sphere silo)           -> docs/bench.md
-#   suite  the suite with --arch cuda        -> DIR/suite.log, failures as they happen in
+#   profile tools/kernel_profile.py --silo-large 100000 --arch cuda (where the 10^5 silo's
+#          step goes, per kernel task)                                   -> docs/bench.md
+#   suite  the suite (or SUITE_TESTS) with --arch cuda -> DIR/suite.log, failures as they happen in
 #          DIR/failures.log
 # Each part's log and a copy of docs/bench.md go to DIR; DIR/machine.txt says which parts
 # ran, were skipped or failed (exit code 124: out of time). The script exits 1 if a part
@@ -15,15 +17,16 @@
 #
 #   sh tools/cuda_checks.sh [DIR]        # DIR defaults to out/cuda
 #   PARTS="bench beds" sh tools/cuda_checks.sh out/cuda
-# Environment: PARTS (default "bench beds silo suite"), PY (python, default python3),
+# Environment: PARTS (default "bench beds silo profile suite"), PY (python, default python3),
 # WORKERS (pytest-xdist workers, default 12), BED_SETTINGS (the beds' settings, default
-# "defaults relaxed fast"), BENCH_S, BEDS_S, SILO_S, SUITE_S (seconds each part may take).
+# "defaults relaxed fast"), SUITE_TESTS (test files or node ids, default all), BENCH_S,
+# BEDS_S, SILO_S, PROFILE_S, SUITE_S (seconds each part may take).
 set -u
 mkdir -p "${1:-out/cuda}"
 dir=$(cd "${1:-out/cuda}" && pwd)
 cd "$(dirname "$0")/.." || exit 1
 py=${PY:-python3}
-parts=${PARTS:-bench beds silo suite}
+parts=${PARTS:-bench beds silo profile suite}
 failed=0
 export PYTHONUNBUFFERED=1
 { date -u; nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv;
@@ -51,8 +54,10 @@ part beds "${BEDS_S:-240}" beds.log "$py" tools/contact_solver.py --beds-only --
     --bed-settings ${BED_SETTINGS:-defaults relaxed fast} --child-timeout 70 --write
 part silo "${SILO_S:-120}" silo.log "$py" tools/silo_large.py --arch cuda --duration 0.05 \
     --write
+part profile "${PROFILE_S:-120}" profile.log "$py" tools/kernel_profile.py --silo-large 100000 \
+    --arch cuda --window 0.01 --top 15 --write
 cp docs/bench.md "$dir/bench.md"
 export TAICHI_SPHERES_FAILURE_LOG="$dir/failures.log"
 part suite "${SUITE_S:-200}" suite.log "$py" -m pytest -v --tb=short -n "${WORKERS:-12}" \
-    --arch cuda -p no:cacheprovider
+    --arch cuda -p no:cacheprovider ${SUITE_TESTS:-}
 exit "$failed"

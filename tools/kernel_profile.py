@@ -6,7 +6,9 @@ Two runs:
 - ``--scene TOML --at T``: the scene file, advanced to T s (untimed), then the window;
 - ``--silo``: the silo of tools/peer_lammps_silo.py (1,722 spheres of d = 6 mm, mu =
   0.5, orifice 5 d), its fill settled 0.3 s with the orifice closed, then discharging:
-  the window starts 0.2 s into the discharge.
+  the window starts 0.2 s into the discharge;
+- ``--silo-large N``: the silo of tools/silo_large.py with N spheres, on any arch; the
+  window starts 0.01 s into the discharge from the lattice fill.
 
 The window (``--window`` s) runs twice from a checkpoint, the first time untimed (so
 that no kernel compiles in the second). Reported: steps, wall ms per step (profiler
@@ -20,6 +22,7 @@ flight.
     python tools/kernel_profile.py --scene scenes/pour.toml --at 1.0 --window 0.2
     python tools/kernel_profile.py --silo --write
     python tools/kernel_profile.py --gas 10000 --arch cuda --window 0.02 --host
+    python tools/kernel_profile.py --silo-large 100000 --arch cuda --window 0.01
 """
 from __future__ import annotations
 
@@ -95,6 +98,8 @@ def main(argv=None):
     ap.add_argument("--scene", default=None)
     ap.add_argument("--at", type=float, default=0.0)
     ap.add_argument("--silo", action="store_true")
+    ap.add_argument("--silo-large", type=int, default=0, metavar="N",
+                    help="the silo of tools/silo_large.py with N spheres (any arch, f64)")
     ap.add_argument("--window", type=float, default=0.1)
     ap.add_argument("--top", type=int, default=8)
     ap.add_argument("--gas", type=int, default=0,
@@ -106,10 +111,12 @@ def main(argv=None):
                     help="also profile the Python side of the window (cProfile, top 15)")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args(argv)
-    if [args.scene is not None, args.silo, args.gas != 0].count(True) != 1:
-        ap.error("give one of --scene TOML, --gas N or --silo")
-    if args.gas < 0:
-        ap.error(f"--gas must be a positive sphere count, got {args.gas}")
+    if [args.scene is not None, args.silo, args.gas != 0, args.silo_large != 0].count(True) != 1:
+        ap.error("give one of --scene TOML, --gas N, --silo or --silo-large N")
+    if args.gas < 0 or args.silo_large < 0:
+        ap.error("--gas and --silo-large take a positive sphere count")
+    if args.silo_large and args.precision != "f64":
+        ap.error("--silo-large runs in f64 (the silo of tools/silo_large.py)")
     if args.silo and (args.arch != "cpu" or args.precision != "f64"):
         ap.error("--silo runs on the CPU in f64 (the silo of tools/silo.py)")
     for mode in runtime.COMPILE_MODES.values():
@@ -127,6 +134,13 @@ def simulation(args, threads) -> tuple:
     of the command line's run."""
     if args.silo:
         return silo_simulation(), "Silo discharge (tools/peer_lammps_silo.py's)", "profile-silo"
+    if args.silo_large:
+        import silo_large  # noqa: E402  (tools/silo_large.py)
+        a = silo_large.parser().parse_args(["--count", str(args.silo_large),
+                                            "--arch", args.arch])
+        return (silo_large.discharging(a, threads),
+                f"Silo of {args.silo_large} spheres (tools/silo_large.py's)",
+                "profile-silo-large" + ("" if args.arch == "cpu" else f"-{args.arch}"))
     if args.gas:
         from taichi_spheres.builders import gas
         sim = ts.Simulation(gas(args.gas, packing=0.3, periodic=True, seed=0), arch=args.arch,

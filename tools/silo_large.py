@@ -45,9 +45,9 @@ def fill_height(count, radius, silo_radius) -> float:
     return (count / per_layer + 1) * step
 
 
-def run(a, threads) -> dict:
-    """One discharge on ``a.arch`` with ``threads`` CPU threads (module docstring; None on
-    a GPU, where the threads only launch kernels)."""
+def discharging(a, threads):
+    """The silo of ``a`` (module docstring) on ``a.arch`` with ``threads`` CPU threads (None
+    on a GPU, where the threads only launch kernels), 0.01 s into its discharge."""
     settings = types.SimpleNamespace(silo_radius=a.silo_radius, radius=a.radius, mu=0.5,
                                      fill=fill_height(a.count, a.radius, a.silo_radius))
     c = a.silo_radius + 0.005
@@ -66,6 +66,12 @@ def run(a, threads) -> dict:
     if state is not None:
         sim.set_state(*state[:2], omega=state[2])
     sim.advance(0.01)
+    return sim
+
+
+def run(a, threads) -> dict:
+    """One timed discharge (module docstring) on ``a.arch`` with ``threads`` CPU threads."""
+    sim = discharging(a, threads)
     untimed_pass(sim, lambda s: s.advance(a.duration))
     s0 = dict(sim.stats)
     t0, w0 = sim.time, time.perf_counter()
@@ -73,7 +79,8 @@ def run(a, threads) -> dict:
     wall = time.perf_counter() - w0
     s = sim.stats
     steps = s["steps"] - s0["steps"]
-    return dict(threads=threads, n=len(x), wall_per_sim=wall / (sim.time - t0), steps=steps,
+    return dict(threads=threads, n=sim.n + s["discharged"],      # the spheres it started with
+                wall_per_sim=wall / (sim.time - t0), steps=steps,
                 rows=(s["contacts"] - s0["contacts"]) / max(steps, 1),
                 sweeps=(s["contact_iterations"] - s0["contact_iterations"]) / max(steps, 1),
                 discharged=s["discharged"], overlap=s["max_overlap"],
@@ -99,8 +106,8 @@ def report(rows, argv, a) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
+def parser() -> argparse.ArgumentParser:
+    """The command line (module docstring); tools/kernel_profile.py builds its silo too."""
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--count", type=int, default=100_000)
     p.add_argument("--radius", type=float, default=0.001, help="sphere radius [m]")
@@ -114,6 +121,12 @@ def main(argv=None):
                    help="cpu or a GPU arch (cuda)")
     p.add_argument("--write", action="store_true")
     p.add_argument("--no-write", dest="write", action="store_false")
+    return p
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    p = parser()
     a = p.parse_args(argv)
     if a.threads is not None and (a.arch != "cpu" or min(a.threads) < 1):
         p.error("--threads takes CPU thread counts >= 1, and only with --arch cpu")

@@ -266,13 +266,13 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         back at any start gap below that: it rested above the floor (docs/algorithm.md,
         "Closing support gaps"). Lowering only lowers potential energy and changes no
         velocity."""
-        up = -self.params.gravity[None].normalized()
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.state.n_spheres[None]):
             self.drop[i] = 0
         ti.loop_config(serialize=ti.static(self.serial))
         for s in range(ti.min(self.n_rows[None], ti.static(self.capacity))):
             if self.row_b[s] < 0 and self.lam[s] > 0:
+                up = self.upwards()
                 n, gap, meff = self.row_geometry(s)
                 slope = n.dot(up)
                 if slope >= 0.5 and gap > self.tol_len[None]:
@@ -284,7 +284,16 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         ti.loop_config(serialize=ti.static(self.serial))
         for i in range(self.state.n_spheres[None]):
             if self.drop[i] > 0:
-                self.state.x[i] -= self.drop[i] * up
+                self.state.x[i] -= self.drop[i] * self.upwards()
+
+    @ti.func
+    def upwards(self):
+        """The unit vector against gravity, computed in each loop that uses it: a vector
+        computed at a kernel's top level and read in a later loop would be kept in
+        Taichi's global temporaries, where Taichi 1.7 does not align vectors, and CUDA
+        refuses an unaligned f64 load (docs/backends.md, "Values shared between a
+        kernel's loops")."""
+        return -self.params.gravity[None].normalized()
 
     @ti.func
     def finish(self):
