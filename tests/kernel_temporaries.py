@@ -1,11 +1,15 @@
 """Print the Taichi IR of every kernel a frictional silo scene compiles (child process).
 
-Run as ``python tests/kernel_temporaries.py``: the scene has gravity, two
+Run as ``python tests/kernel_temporaries.py [no-substeps]``: the scene has gravity, two
 materials with unequal radii (shock propagation, per-sphere inertia), rolling and
 twisting resistance, a floor with an orifice, a cylinder, a cone and a sink, and every
-loop runs in parallel (as on a GPU), with the default rules and the bounded position
-pass; Taichi writes the IR to this process's stdout, which
-tests/test_kernel_temporaries.py reads.
+loop runs in parallel (as on a GPU); it runs with the default rules and the bounded
+position pass, with ``no-substeps`` also without substeps (then the overlap measure
+over every pair runs).
+Taichi writes the IR to this process's stdout, which tests/test_kernel_temporaries.py
+reads. Not covered: the fused step and the serial solver (CPU-only paths, one task
+each) and the `optimized` compile mode (the test compiles `fast`; the temporaries
+come from Taichi's offload pass, which runs in both).
 """
 import os
 import sys
@@ -46,6 +50,8 @@ def main():
         mode["print_ir_dbg_info"] = False
     tuning = Tuning().with_(serial_solver_below=0, serial_light_below=0,
                             serial_heavy_below=0, bounded_position_pass=True)
+    if sys.argv[1:] == ["no-substeps"]:
+        tuning = tuning.with_(substeps=False)
     sim = ts.Simulation(scene(), threads=2, tuning=tuning, compile_all=True)
     sim.advance(0.02)
 

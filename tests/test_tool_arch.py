@@ -76,6 +76,7 @@ def test_contact_solver_options_that_do_not_go_together(capsys, argv, words):
     (["--silo-large", "-5"], "take a positive sphere count"),
     (["--silo-large", "1000", "--silo"], "give one of"),
     (["--silo-large", "1000", "--precision", "f32"], "--silo-large runs in f64"),
+    (["--silo-large", "1000", "--arch", "vulkan"], "on cpu or cuda"),
 ])
 def test_kernel_profile_options_that_do_not_go_together(capsys, argv, words):
     with pytest.raises(SystemExit):

@@ -19,7 +19,8 @@
 #   PARTS="bench beds" sh tools/cuda_checks.sh out/cuda
 # Environment: PARTS (default "bench beds silo profile suite"), PY (python, default python3),
 # WORKERS (pytest-xdist workers, default 12), BED_SETTINGS (the beds' settings, default
-# "defaults relaxed fast"), SUITE_TESTS (test files or node ids, default all), BENCH_S,
+# "defaults relaxed fast"), SUITE_TESTS (test files or node ids split at spaces, so no
+# `-k "a or b"` and no paths with spaces; default all), BENCH_S,
 # BEDS_S, SILO_S, PROFILE_S, SUITE_S (seconds each part may take).
 set -u
 mkdir -p "${1:-out/cuda}"

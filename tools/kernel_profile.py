@@ -115,8 +115,8 @@ def main(argv=None):
         ap.error("give one of --scene TOML, --gas N, --silo or --silo-large N")
     if args.gas < 0 or args.silo_large < 0:
         ap.error("--gas and --silo-large take a positive sphere count")
-    if args.silo_large and args.precision != "f64":
-        ap.error("--silo-large runs in f64 (the silo of tools/silo_large.py)")
+    if args.silo_large and (args.precision != "f64" or args.arch not in ("cpu", "cuda")):
+        ap.error("--silo-large runs in f64 on cpu or cuda (the silo of tools/silo_large.py)")
     if args.silo and (args.arch != "cpu" or args.precision != "f64"):
         ap.error("--silo runs on the CPU in f64 (the silo of tools/silo.py)")
     for mode in runtime.COMPILE_MODES.values():

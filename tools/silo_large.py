@@ -79,7 +79,9 @@ def run(a, threads) -> dict:
     wall = time.perf_counter() - w0
     s = sim.stats
     steps = s["steps"] - s0["steps"]
-    return dict(threads=threads, n=sim.n + s["discharged"],      # the spheres it started with
+    # the spheres it started with: the sink does not recycle, and restore (untimed_pass)
+    # puts the counters back with the state
+    return dict(threads=threads, n=sim.n + s["discharged"],
                 wall_per_sim=wall / (sim.time - t0), steps=steps,
                 rows=(s["contacts"] - s0["contacts"]) / max(steps, 1),
                 sweeps=(s["contact_iterations"] - s0["contact_iterations"]) / max(steps, 1),
