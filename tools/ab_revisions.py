@@ -33,6 +33,7 @@ same steps, so the ratio of ms per step is the ratio of their costs.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
 import os
 import re
@@ -52,6 +53,23 @@ def checkout(rev: str, where: str) -> str:
     subprocess.run(["git", "-C", ROOT, "worktree", "add", "--detach", "-f", path, rev],
                    check=True, capture_output=True)
     return path
+
+
+@contextlib.contextmanager
+def worktrees(*revs):
+    """{rev: path} of a detached worktree per revision, removed (with their temporary
+    folder) when the block ends, whatever ends it."""
+    where = tempfile.mkdtemp(prefix="ab_revisions_")
+    trees = {}
+    try:
+        for rev in revs:
+            trees[rev] = checkout(rev, where)
+        yield trees
+    finally:
+        for tree in trees.values():
+            subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", tree],
+                           capture_output=True)
+        shutil.rmtree(where, ignore_errors=True)
 
 
 def throughput(tree: str, n: int, precision: str) -> float:
@@ -161,22 +179,14 @@ def report(args, runs, beds, unit) -> None:
 def silo_main(args) -> int:
     """--silo: alternate the two revisions' silo runs; print ms per step and the
     per-round ratios B / A."""
-    where = tempfile.mkdtemp(prefix="ab_revisions_")
-    trees, runs, steps = {}, {args.rev_a: [], args.rev_b: []}, {}
-    try:
-        for rev in (args.rev_a, args.rev_b):
-            trees[rev] = checkout(rev, where)
+    runs, steps = {args.rev_a: [], args.rev_b: []}, {}
+    with worktrees(args.rev_a, args.rev_b) as trees:
         for k in range(args.rounds):
             for rev in (args.rev_a, args.rev_b):
                 per_step, steps[rev] = silo_cost(trees[rev], args.window, args.repeats)
                 runs[rev].append(per_step)
                 print(f"round {k + 1} {rev}: {per_step * 1e3:.2f} ms per step "
                       f"(fastest of {args.repeats}, {steps[rev]} steps)", flush=True)
-    finally:
-        for tree in trees.values():
-            subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", tree],
-                           capture_output=True)
-        shutil.rmtree(where, ignore_errors=True)
     a, b = args.rev_a, args.rev_b
     if len({s for s in steps.values()}) > 1:
         print(f"warning: the revisions ran different steps ({steps}): they do not keep "
@@ -219,11 +229,7 @@ def main(argv=None):
         return silo_main(args)
     unit = "simulated s per wall s (pour bed, 1 thread)" if args.pour_bed else \
         "sphere-steps/s"
-    where = tempfile.mkdtemp(prefix="ab_revisions_")
-    trees = {}
-    try:
-        for rev in (args.rev_a, args.rev_b):
-            trees[rev] = checkout(rev, where)
+    with worktrees(args.rev_a, args.rev_b) as trees:
         runs = {args.rev_a: [], args.rev_b: []}
         beds = {args.rev_a: [], args.rev_b: []}
         for k in range(args.rounds):
@@ -238,11 +244,6 @@ def main(argv=None):
                     runs[rev].append(throughput(trees[rev], args.n, args.precision))
                     print(f"round {k + 1} {rev}: {runs[rev][-1]:.3e} {unit}", flush=True)
         report(args, runs, beds, unit)
-    finally:
-        for tree in trees.values():
-            subprocess.run(["git", "-C", ROOT, "worktree", "remove", "--force", tree],
-                           capture_output=True)
-        shutil.rmtree(where, ignore_errors=True)
     return 0
 
 

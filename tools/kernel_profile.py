@@ -7,7 +7,7 @@ Two runs:
 - ``--silo``: the silo of tools/peer_lammps_silo.py (1,722 spheres of d = 6 mm, mu =
   0.5, orifice 5 d), its fill settled 0.3 s with the orifice closed, then discharging:
   the window starts 0.2 s into the discharge;
-- ``--silo-large N``: the silo of tools/silo_large.py with N spheres, on any arch; the
+- ``--silo-large N``: the silo of tools/silo_large.py with N spheres, on cpu or cuda; the
   window starts 0.01 s into the discharge from the lattice fill.
 
 The window (``--window`` s) runs twice from a checkpoint, the first time untimed (so
@@ -99,7 +99,7 @@ def main(argv=None):
     ap.add_argument("--at", type=float, default=0.0)
     ap.add_argument("--silo", action="store_true")
     ap.add_argument("--silo-large", type=int, default=0, metavar="N",
-                    help="the silo of tools/silo_large.py with N spheres (any arch, f64)")
+                    help="the silo of tools/silo_large.py with N spheres (cpu or cuda, f64)")
     ap.add_argument("--window", type=float, default=0.1)
     ap.add_argument("--top", type=int, default=8)
     ap.add_argument("--gas", type=int, default=0,
