@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Where a step's time goes: Taichi's kernel profiler over a window of a run, 1 thread.
 
-Two runs:
+The runs (``--gas N``, the gas of tools/bench.py, is the fourth):
 
 - ``--scene TOML --at T``: the scene file, advanced to T s (untimed), then the window;
 - ``--silo``: the silo of tools/peer_lammps_silo.py (1,722 spheres of d = 6 mm, mu =
