@@ -188,6 +188,12 @@ class Performance:
     parallel_interleave: the same for sweeps running in parallel on several CPU
         threads (1: one cell per loop iteration; on 2 cores 8 measured no faster:
         tools/solver_interleave.py).
+    sweeps_per_wait: on the CPU, sweeps of a parallel contact solve launched before
+        the host waits to learn whether the solve is done (contacts/pgs.py
+        batched_sweep; 1: each sweep returns its residual). gpu_sweeps_per_wait: the
+        same on a GPU, which queues the launches while the host goes on, so that the
+        host's wait, not a sweep's work, no longer sets the pace; a solve runs at
+        most this many sweeps past its end, empty ones.
     """
 
     serial_light_below: int = 200_000
@@ -211,10 +217,14 @@ class Performance:
     warm_slots: int = 16
     solver_interleave: int = 8
     parallel_interleave: int = 1
+    sweeps_per_wait: int = 1
+    gpu_sweeps_per_wait: int = 8
 
     def __post_init__(self):
-        """ValueError naming the field: solver_interleave or parallel_interleave below 1."""
-        _require_at_least(self, ("solver_interleave", "parallel_interleave"), 1)
+        """ValueError naming the field: solver_interleave, parallel_interleave or a
+        sweeps_per_wait below 1."""
+        _require_at_least(self, ("solver_interleave", "parallel_interleave",
+                                 "sweeps_per_wait", "gpu_sweeps_per_wait"), 1)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -161,6 +161,8 @@ def test_over_relaxed_sweeps_hold_the_heavy_on_light_column(arch, precision):
 @pytest.mark.parametrize("name, value", [("relaxation", 2.0), ("relaxation", 0.0),
                                          ("solver_interleave", 0),
                                          ("parallel_interleave", 0),
+                                         ("sweeps_per_wait", 0),
+                                         ("gpu_sweeps_per_wait", 0),
                                          ("contact_iterations", 0),
                                          ("position_iterations", 0), ("plain_sweeps", -1),
                                          ("shock_propagation", "always"),
@@ -337,7 +339,9 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     """The one-launch serial solver and the per-colour parallel launches (forced with
     serial_heavy_below = serial_solver_below = 0), each with one cell per sweep loop
     iteration or several interleaved (Performance.solver_interleave and
-    parallel_interleave), give the same
+    parallel_interleave), and with one wait per sweep or per batch of several
+    (sweeps_per_wait, gpu_sweeps_per_wait: 4 and 7, which a cap of 15 does not
+    divide), give the same
     state: an FCC block in a box (the default over-relaxed sweeps and their plain last
     sweeps), and layers on a grid with a third colour on two periodic axes (plain
     sweeps, relaxation 1); with a cap of 15 sweeps, 10 of them plain, solves also stop
@@ -351,13 +355,14 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     if "bounded" in case:      # low caps, where the bound scales the position pass
         rules.update(bounded_position_pass=True)
     out, sweeps = [], []
-    configs = ((3000, 8), (0, 8))
+    configs = ((3000, 8, 1), (0, 8, 1), (0, 8, 4))   # (below, interleave, batch)
     if "15 sweeps" not in case:        # the interleaving does not depend on the cap
-        configs += ((3000, 1), (0, 3))
-    for below, interleave in configs:
+        configs += ((3000, 1, 1), (0, 3, 1), (0, 1, 7))
+    for below, interleave, batch in configs:
         sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(
             serial_heavy_below=below, serial_solver_below=below, solver_interleave=interleave,
-            parallel_interleave=interleave, **rules))
+            parallel_interleave=interleave, sweeps_per_wait=batch,
+            gpu_sweeps_per_wait=batch, **rules))
         counts = []
         while sim.time < seconds:
             sim.advance(sim.max_step())

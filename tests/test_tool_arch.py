@@ -41,12 +41,13 @@ def test_silo_rows_name_the_arch_or_the_threads():
     a = types.SimpleNamespace(radius=0.001, silo_radius=0.04, orifice=8.0, settle=0.0,
                               duration=0.02, arch="cuda")
     row = dict(n=100000, threads=None, wall_per_sim=12.3456, steps=42, rows=152843.0,
-               sweeps=100.0, discharged=0, overlap=4.2e-4)
-    text = silo_large.report([row], ["--arch", "cuda"], a)
-    assert "| CUDA | 12.35 | 42 | 152843 | 100 | 0 | 4.2e-04 |" in text
+               sweeps=100.0, discharged=0, overlap=4.2e-4, batch=None, digest="ab12")
+    text = silo_large.report([row, dict(row, batch=8)], ["--arch", "cuda"], a)
+    assert "| CUDA | default | 12.35 | 42 | 152843 | 100 | 0 | 4.2e-04 | ab12 |" in text
+    assert "| CUDA | 8 | 12.35 |" in text
     a.arch = "cpu"
     text = silo_large.report([dict(row, threads=2, wall_per_sim=1084.2)], [], a)
-    assert "| 2 | 1084 | 42 |" in text
+    assert "| 2 | default | 1084 | 42 |" in text
 
 
 def test_kernel_profile_needs_a_run_to_profile(capsys):

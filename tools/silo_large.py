@@ -16,6 +16,8 @@ discharged, the largest overlap.
     python tools/silo_large.py --count 20000 --threads 2 --no-write
     python tools/silo_large.py --write                  # the 'silo-large' section of docs/bench.md
     python tools/silo_large.py --arch cuda --write      # on a GPU: section 'silo-large-cuda'
+    python tools/silo_large.py --arch cuda --duration 0.02 --batches 8 1 --write
+                                     # sweeps per wait compared: 'silo-large-cuda-waits'
 """
 from __future__ import annotations
 
@@ -34,6 +36,8 @@ sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, HERE)
 
 import taichi_spheres as ts  # noqa: E402
+from taichi_spheres import observe  # noqa: E402
+from taichi_spheres.config import Tuning  # noqa: E402
 import silo  # noqa: E402  (tools/silo.py)
 from machine import hardware, untimed_pass, write_section  # noqa: E402
 
@@ -45,9 +49,13 @@ def fill_height(count, radius, silo_radius) -> float:
     return (count / per_layer + 1) * step
 
 
-def discharging(a, threads):
+def discharging(a, threads, batch=None):
     """The silo of ``a`` (module docstring) on ``a.arch`` with ``threads`` CPU threads (None
-    on a GPU, where the threads only launch kernels), 0.01 s into its discharge."""
+    on a GPU, where the threads only launch kernels), 0.01 s into its discharge;
+    ``batch``: the contact solver's sweeps per wait (Performance.sweeps_per_wait and
+    gpu_sweeps_per_wait; None: the defaults)."""
+    tuning = Tuning() if batch is None else Tuning().with_(
+        sweeps_per_wait=batch, gpu_sweeps_per_wait=batch)
     settings = types.SimpleNamespace(silo_radius=a.silo_radius, radius=a.radius, mu=0.5,
                                      fill=fill_height(a.count, a.radius, a.silo_radius))
     c = a.silo_radius + 0.005
@@ -57,21 +65,23 @@ def discharging(a, threads):
     state = None
     if a.settle > 0:
         closed = ts.Simulation(silo.silo_scene(x, np.zeros_like(x), None, settings, None),
-                               arch=a.arch, threads=threads)
+                               arch=a.arch, threads=threads, tuning=tuning)
         closed.advance(a.settle)
         st = closed.state()
         state = (st.x, st.v, st.omega)
     sim = ts.Simulation(silo.silo_scene(x, np.zeros_like(x), None, settings, hole),
-                        arch=a.arch, threads=threads)
+                        arch=a.arch, threads=threads, tuning=tuning)
     if state is not None:
         sim.set_state(*state[:2], omega=state[2])
     sim.advance(0.01)
     return sim
 
 
-def run(a, threads) -> dict:
-    """One timed discharge (module docstring) on ``a.arch`` with ``threads`` CPU threads."""
-    sim = discharging(a, threads)
+def run(a, threads, batch=None) -> dict:
+    """One timed discharge (module docstring) on ``a.arch`` with ``threads`` CPU threads
+    and ``batch`` sweeps per wait (None: the default); the end state's digest too (the
+    batch changes no bits)."""
+    sim = discharging(a, threads, batch)
     untimed_pass(sim, lambda s: s.advance(a.duration))
     s0 = dict(sim.stats)
     t0, w0 = sim.time, time.perf_counter()
@@ -86,7 +96,8 @@ def run(a, threads) -> dict:
                 rows=(s["contacts"] - s0["contacts"]) / max(steps, 1),
                 sweeps=(s["contact_iterations"] - s0["contact_iterations"]) / max(steps, 1),
                 discharged=s["discharged"], overlap=s["max_overlap"],
-                arch=a.arch)
+                arch=a.arch, batch=batch,
+                digest=observe.state_digest(sim.state(), sim.precision))
 
 
 def report(rows, argv, a) -> str:
@@ -97,14 +108,17 @@ def report(rows, argv, a) -> str:
              + (f"settled {a.settle:g} s with the orifice closed, then " if a.settle > 0
                 else "from the lattice fill (the bed compacts while it discharges), ")
              + f"{a.duration:g} s of discharge timed.", "",
-             "| threads | wall s / sim s | steps | rows / step | sweeps / step | "
-             "discharged | max overlap / d |", "|---|---|---|---|---|---|---|"]
+             "| threads | sweeps / wait | wall s / sim s | steps | rows / step | "
+             "sweeps / step | discharged | max overlap / d | end state digest |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         wall = r["wall_per_sim"]
-        lines.append(f"| {r['threads'] or a.arch.upper()} | {wall:.{0 if wall >= 100 else 2}f} | "
+        batch = r["batch"] or "default"
+        lines.append(f"| {r['threads'] or a.arch.upper()} | {batch} | "
+                     f"{wall:.{0 if wall >= 100 else 2}f} | "
                      f"{r['steps']} | "
                      f"{r['rows']:.0f} | {r['sweeps']:.0f} | {r['discharged']} | "
-                     f"{r['overlap']:.1e} |")
+                     f"{r['overlap']:.1e} | {r['digest']} |")
     return "\n".join(lines)
 
 
@@ -121,6 +135,9 @@ def parser() -> argparse.ArgumentParser:
                    help="CPU thread counts (default 1 2; not on a GPU)")
     p.add_argument("--arch", default="cpu", choices=ts.runtime.ARCHS,
                    help="cpu or a GPU arch (cuda)")
+    p.add_argument("--batches", type=int, nargs="+", default=[None],
+                   help="contact solver sweeps per wait to compare (default: the "
+                        "default of Performance)")
     p.add_argument("--write", action="store_true")
     p.add_argument("--no-write", dest="write", action="store_false")
     return p
@@ -135,12 +152,15 @@ def main(argv=None):
     rows = []
     a.threads = (a.threads or [1, 2]) if a.arch == "cpu" else [None]
     for threads in a.threads:
-        rows.append(run(a, threads))
-        print(rows[-1], flush=True)
+        for batch in a.batches:
+            rows.append(run(a, threads, batch))
+            print(rows[-1], flush=True)
     text = report(rows, [s for s in argv if s != "--write"], a)
     print(text)
     if a.write:
         name = "silo-large" if a.arch == "cpu" else f"silo-large-{a.arch}"
+        if a.batches != [None]:      # a comparison of sweeps per wait
+            name += "-waits"
         write_section(os.path.join(HERE, "..", "docs", "bench.md"), name, text)
 
 

@@ -109,17 +109,27 @@ class GaussSeidel:
         ti.atomic_max(self.residual[None], worst)
 
     @ti.func
-    def sweep_colour(self, colour, mode: ti.template(), serial: ti.template(), omega):
+    def sweep_colour(self, colour, mode: ti.template(), serial: ti.template(), omega,
+                     batched: ti.template() = False):
         """One pass over the cells of one colour that own rows (disjoint blocks: no two
         threads touch a sphere), in list_active_cells order, k cells at a time with their
         rows interleaved (sweep_cells; k: ContactSolver.interleave for serial sweeps,
-        interleave_parallel for parallel ones)."""
+        interleave_parallel for parallel ones). ``batched``: a sweep of a batch
+        (batched_sweep): no cell once the batch's solve is done, the relaxation from
+        batch_omega instead of ``omega``."""
         start = self.colour_active[colour]
         end = self.colour_active[colour + 1]
         k = ti.static(self.interleave if serial else self.interleave_parallel)
+        count = (end - start + k - 1) // k
+        if ti.static(batched):
+            if self.batch_done[None] != 0:
+                count = 0
         ti.loop_config(serialize=serial, block_dim=ti.static(self.sweep_block))
-        for u in range((end - start + k - 1) // k):
-            self.sweep_cells(start + k * u, end, mode, omega, k)
+        for u in range(count):
+            relax = omega
+            if ti.static(batched):
+                relax = self.batch_omega[None]
+            self.sweep_cells(start + k * u, end, mode, relax, k)
 
     @ti.func
     def colour_of(self, k):
@@ -175,6 +185,32 @@ class GaussSeidel:
             self.sweep_colour(colour, WARM, True, 1.0)
 
     @ti.func
+    def sweep_relaxation(self, it, relaxed, cap):
+        """(omega, plain) of sweep ``it`` (from 0) of a solve capped at ``cap`` sweeps:
+        over-relaxed while ``relaxed`` and not among the last Rules.plain_sweeps of the
+        cap, else plain (omega = 1; plain = 1)."""
+        plain = 1 if (relaxed == 0 or it >= cap - ti.static(self.rules.plain_sweeps)) else 0
+        omega = ti.cast(1, self.real)
+        if plain == 0:
+            omega = ti.cast(ti.static(self.rules.relaxation), self.real)
+        return omega, plain
+
+    @ti.func
+    def after_sweep(self, it, relaxed, plain, cap, tol):
+        """(it, relaxed, done) once sweep ``it`` left ``residual``: a residual within
+        ``tol`` [m/s] ends the over-relaxation, and the solve after a plain sweep; the
+        cap ends it too."""
+        it += 1
+        done = 0
+        if not self.residual[None] > tol:
+            relaxed = 0
+            if plain != 0:
+                done = 1
+        if it >= cap:
+            done = 1
+        return it, relaxed, done
+
+    @ti.func
     def iterate_serially(self, mode: ti.template(), cap, tol: ti.template()):
         """Sweeps over every colour until a plain sweep (omega 1) leaves the residual
         within tol[None], or cap sweeps ran; returns the sweeps run."""
@@ -182,18 +218,60 @@ class GaussSeidel:
         relaxed = 1 if ti.static(self.rules.relaxation != 1) else 0
         done = 0
         while done == 0:
-            plain = relaxed == 0 or it >= cap - ti.static(self.rules.plain_sweeps)
-            omega = ti.cast(1, self.real)
-            if not plain:
-                omega = ti.cast(ti.static(self.rules.relaxation), self.real)
+            omega, plain = self.sweep_relaxation(it, relaxed, cap)
             self.residual[None] = 0
             for colour in range(self.n_colours_f[None]):
                 self.sweep_colour(colour, mode, True, omega)
-            it += 1
-            if not self.residual[None] > tol[None]:
-                relaxed = 0
-                if plain:
-                    done = 1
-            if it >= cap:
-                done = 1
+            it, relaxed, done = self.after_sweep(it, relaxed, plain, cap, tol[None])
         return it
+
+    @ti.func
+    def begin_batched_sweep(self, first, cap):
+        """Before a sweep of a batch (kernel top level, one serial task): the solve's
+        counters reset if ``first``; unless the solve is done, this sweep's relaxation
+        to batch_omega and the residual to 0."""
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            if first != 0:
+                self.batch_it[None] = 0
+                self.batch_relaxed[None] = 1 if ti.static(self.rules.relaxation != 1) else 0
+                self.batch_done[None] = 0
+            if self.batch_done[None] == 0:
+                omega, plain = self.sweep_relaxation(
+                    self.batch_it[None], self.batch_relaxed[None], cap)
+                self.batch_omega[None] = omega
+                self.batch_plain[None] = plain
+                self.residual[None] = 0
+
+    @ti.func
+    def end_batched_sweep(self, cap, tol: ti.template()):
+        """After a sweep of a batch (one serial task): after_sweep on the batch's
+        counters, unless the solve was already done."""
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            if self.batch_done[None] == 0:
+                it, relaxed, done = self.after_sweep(
+                    self.batch_it[None], self.batch_relaxed[None], self.batch_plain[None],
+                    cap, tol[None])
+                self.batch_it[None] = it
+                self.batch_relaxed[None] = relaxed
+                self.batch_done[None] = done
+
+    @ti.func
+    def batched_sweep(self, first, mode: ti.template(), colours: ti.template(), cap,
+                      tol: ti.template()):
+        """One sweep of iterate_serially's solve, launched by the host several at a
+        time before it waits (kernel top level): a serial task deciding the relaxation
+        (the solve's counters reset if ``first``), a parallel task per colour (empty once
+        the solve is done) and a serial task testing the residual. The same sweeps with
+        the same relaxations as iterate_serially, so the same bits; the host waits once
+        per batch (batch_result) instead of once per sweep."""
+        self.begin_batched_sweep(first, cap)
+        for colour in ti.static(range(colours)):
+            self.sweep_colour(colour, mode, False, 1.0, True)
+        self.end_batched_sweep(cap, tol)
+
+    @ti.func
+    def batch_result(self):
+        """The sweeps a batched solve ran once it is done, else 0."""
+        return self.batch_it[None] if self.batch_done[None] != 0 else 0

@@ -132,6 +132,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         # two), so that a colour still splits into as many tasks; a GPU keeps its default
         per_task = max(1, cfg.default_cpu_block_dim // self.interleave_parallel)
         self.sweep_block = 1 << (per_task.bit_length() - 1) if cpu else None
+        # sweeps a parallel solve launches before it waits (pgs.batched_sweep)
+        self.batch = self.perf.sweeps_per_wait if cpu else self.perf.gpu_sweeps_per_wait
         self.shock = shock_compiled(features, self.rules)
         # warm_energy.py: the warm start scaled so that it adds no energy
         bound = self.rules.bounded_warm_start
@@ -188,6 +190,13 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.tol_w = ti.field(real, shape=())        # pseudo-velocity tolerance [m/s]
         self.n_colours_f = ti.field(ti.i32, shape=())
         self.tol_len = ti.field(real, shape=())      # position tolerance [m] (bind)
+        # a batched solve (pgs.batched_sweep): its sweeps so far,
+        # over-relaxing still, done; this sweep's omega and plainness
+        self.batch_it = ti.field(ti.i32, shape=())
+        self.batch_relaxed = ti.field(ti.i32, shape=())
+        self.batch_done = ti.field(ti.i32, shape=())
+        self.batch_plain = ti.field(ti.i32, shape=())
+        self.batch_omega = ti.field(real, shape=())
         self._allocate_warm_energy(cap, k)
         if self.bounded_position_pass:
             self._allocate_position_energy()
@@ -418,7 +427,21 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
                 return self.residual[None]
             return sweep
 
+        # and one per mode and colour count for a sweep of a batch (pgs.batched_sweep),
+        # which returns nothing: a GPU queues the launches without the host waiting
+        def batched_kernel(mode, colours, cap, tol):
+            @ti.kernel
+            def sweep(first: ti.i32):
+                self.batched_sweep(first, mode, colours, cap, tol)
+            return sweep
+
+        @ti.kernel
+        def batch_result() -> ti.i32:
+            return self.batch_result()
+
         self._sweep_kernel = sweep_kernel
+        self._batched_kernel = batched_kernel
+        self._batch_result = batch_result
         self._sweeps = {}
 
         @ti.kernel
@@ -469,7 +492,21 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self._end(iterations, positions)
 
     def _iterate(self, mode, cap, tol) -> int:
-        """iterate_serially with one launch per sweep (same sweeps, same bits)."""
+        """iterate_serially with one launch per sweep, each returning its residual, or
+        (self.batch > 1) batches of self.batch launches and one wait for whether the
+        solve is done (same sweeps, same bits)."""
+        if self.batch > 1:
+            key = ("batched", mode, self.n_colours)
+            if key not in self._sweeps:
+                self._sweeps[key] = self._batched_kernel(mode, self.n_colours, cap, tol)
+            sweep, first = self._sweeps[key], 1
+            while True:
+                for _ in range(self.batch):
+                    sweep(first)
+                    first = 0
+                ran = self._batch_result()
+                if ran:
+                    return ran
         limit = tol[None]
         sweep = self._sweep(mode)
         relaxed = self.rules.relaxation != 1
