@@ -190,10 +190,11 @@ class Performance:
         tools/solver_interleave.py).
     sweeps_per_wait: on the CPU, sweeps of a parallel contact solve launched before
         the host waits to learn whether the solve is done (contacts/pgs.py
-        batched_sweep; 1: each sweep returns its residual). gpu_sweeps_per_wait: the
-        same on a GPU, which queues the launches while the host goes on, so that the
-        host's wait, not a sweep's work, no longer sets the pace; a solve runs at
-        most this many sweeps past its end, empty ones.
+        batched_sweep; 1: each sweep returns its residual). A CPU runs each launch to
+        its end before the host goes on, so there a batch saves no wait (default 1).
+        gpu_sweeps_per_wait: the same on a GPU, which queues the launches while the
+        host goes on, so that the host's wait, not a sweep's work, no longer sets the
+        pace; a solve runs at most this many sweeps past its end, empty ones.
     """
 
     serial_light_below: int = 200_000
