@@ -104,6 +104,13 @@ class Rules:
         collision of a sphere near a held one, a wall or an object. A few fast
         spheres in flight then no longer set how often a bed is solved
         (stepping.py, docs/algorithm.md "Substeps"). On by default.
+    step_scaled_sweeps: scale each step's velocity and position sweep caps (and their
+        plain sweeps) by the step's length over a quiet bed's, (contact_margin - 1) D
+        / impact speed, so that many short steps (a discharging silo, whose flowing
+        grains in contact bound the step) run about the sweeps per simulated second of
+        quiet ones, each warm-started from the last (contacts/pgs.py set_cap).
+        min_scaled_sweeps: the fewest sweeps a scaled cap keeps. Off by default
+        (measured in docs/bench.md, "Sweeps scaled with the step").
     """
 
     impact_factor: float = 2.0
@@ -123,11 +130,14 @@ class Rules:
     projection_iterations: int = 8
     projection_relaxation: float = 0.5
     substeps: bool = True
+    step_scaled_sweeps: bool = False
+    min_scaled_sweeps: int = 8
 
     def __post_init__(self):
         """ValueError naming the field: shock_propagation or bounded_warm_start not one
         of SHOCK_MODES, relaxation outside (0, 2) (where projected Gauss-Seidel
-        converges), fewer than one velocity or position sweep, negative plain_sweeps."""
+        converges), fewer than one velocity or position sweep (or scaled sweep),
+        negative plain_sweeps, a flag that is not a bool."""
         if self.bounded_warm_start not in SHOCK_MODES:
             raise ValueError(f"tuning bounded_warm_start must be one of {', '.join(SHOCK_MODES)}, "
                              f"got {self.bounded_warm_start!r}")
@@ -138,7 +148,8 @@ class Rules:
             raise ValueError(f"tuning relaxation must be in (0, 2), got {self.relaxation!r}")
         _require_at_least(self, ("contact_iterations", "position_iterations"), 1)
         _require_at_least(self, ("plain_sweeps",), 0)
-        for name in ("substeps", "bounded_position_pass"):
+        _require_at_least(self, ("min_scaled_sweeps",), 1)
+        for name in ("substeps", "bounded_position_pass", "step_scaled_sweeps"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"tuning {name} must be True or False, "
                                  f"got {getattr(self, name)!r}")

@@ -4,6 +4,8 @@ piles, energy, momentum, determinism, warm starting, impacts into resting sphere
 Tolerances: overlaps relative to the diameter; speeds in m/s (f32 keeps about 7
 digits of a position of order 0.1 m, so its speed and energy floors are wider).
 """
+import math
+
 import numpy as np
 import pytest
 
@@ -334,7 +336,8 @@ def test_solver_conserves_momentum_without_walls(arch):
 
 @pytest.mark.parametrize("case", ["fcc block", "odd periodic colours, plain sweeps",
                                   "fcc block, 15 sweeps",
-                                  "fcc block, 15 sweeps, bounded position pass"])
+                                  "fcc block, 15 sweeps, bounded position pass",
+                                  "fcc block, 15 sweeps scaled with the step"])
 def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     """The one-launch serial solver and the per-colour parallel launches (forced with
     serial_heavy_below = serial_solver_below = 0), each with one cell per sweep loop
@@ -346,7 +349,8 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     sweeps), and layers on a grid with a third colour on two periodic axes (plain
     sweeps, relaxation 1); with a cap of 15 sweeps, 10 of them plain, solves also stop
     inside the plain ones (and the bounded position pass sums its energies in the same
-    order on both paths)."""
+    order on both paths), and with caps scaled with each step's length
+    (Rules.step_scaled_sweeps) both paths take the same caps."""
     scene, seconds = ((_periodic_layer_scene(), 0.2) if case.startswith("odd periodic")
                       else (fcc_block(4), 0.3))
     rules = dict(relaxation=1.0) if "plain" in case else {}
@@ -354,6 +358,8 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
         rules.update(contact_iterations=15, position_iterations=15)
     if "bounded" in case:      # low caps, where the bound scales the position pass
         rules.update(bounded_position_pass=True)
+    if "scaled" in case:       # caps that change from step to step
+        rules.update(step_scaled_sweeps=True, min_scaled_sweeps=2)
     out, sweeps = [], []
     configs = ((3000, 8, 1), (0, 8, 1), (0, 8, 4))   # (below, interleave, batch)
     if "15 sweeps" not in case:        # the interleaving does not depend on the cap
@@ -375,6 +381,36 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     assert all(counts == sweeps[0] for counts in sweeps)
     if case == "fcc block, 15 sweeps":   # some solves stopped inside the plain last sweeps
         assert any(5 < n < 15 for step in sweeps[0] for n in step)
+
+
+def test_step_scaled_sweeps_follow_the_step_length(arch, precision):
+    """Rules.step_scaled_sweeps: an FCC block settles from its lattice in steps of half
+    and then a twentieth of a quiet bed's step h_q = (contact_margin - 1) D / impact
+    speed. Each solve runs at most ceil(cap h / h_q) velocity and position sweeps (at
+    least min_scaled_sweeps); the first solves reach that bound (with the full caps
+    they take ~100); the block then settles without overlap."""
+    tuning = Tuning().with_(step_scaled_sweeps=True, min_scaled_sweeps=3)
+    scene = fcc_block(4)
+    sim = ts.Simulation(scene, arch=arch, precision=precision, tuning=tuning)
+    rules = tuning.physics
+    quiet = (rules.contact_margin - 1) * sim.step_fraction * float(scene.radius.min()) \
+        / sim.rest_speed
+    reached = False
+    for share in (0.5, 0.05):
+        for _ in range(10):
+            sim.advance(share * quiet)
+            step = sim.last_step
+            assert step["contacts"] > 0
+            for used, cap in ((step["contact_iterations"], rules.contact_iterations),
+                              (step["position_iterations"], rules.position_iterations)):
+                bound = max(math.ceil(cap * share * (1 + 1e-9)), 3)
+                assert 1 <= used <= bound
+                reached |= used >= bound - 1 and bound > 3
+    assert reached
+    sim.advance(1.0)
+    st = sim.state()
+    assert brute_overlap(st, scene) <= 1e-4
+    assert np.abs(st.v).max() <= _speed_floor(precision)
 
 
 def test_warm_start_cuts_iterations(arch):

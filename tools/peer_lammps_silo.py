@@ -17,6 +17,7 @@ seconds per simulated second of the discharge, and their ratios.
     python tools/peer_lammps_silo.py --step-fraction 0.3 --sweeps 30 --write --section lammps-coarse
     python tools/peer_lammps_silo.py --step-fraction 0.3 --sweeps 10 --position-sweeps 10 \
         --shock --write --section lammps-shock
+    python tools/peer_lammps_silo.py --scaled-sweeps --write --section lammps-scaled
 """
 from __future__ import annotations
 
@@ -99,6 +100,7 @@ def main(argv=None):
                 f"{a.position_sweeps or Rules().position_iterations}"
                 f", relaxation {a.relaxation if a.relaxation is not None else Rules().relaxation:g}"
                 f"{', shock propagation' if a.shock else ''}"
+                f"{', sweep caps scaled with the step' if a.scaled_sweeps else ''}"
                 f"{', substeps' if silo.engine_options(a)['tuning'].physics.substeps else ', no substeps'})"),
              "", f"{n} spheres of d = {2e3 * a.radius:g} mm (2500 kg/m^3, e = 0.5, mu = "
                  f"{a.mu}), silo radius {1e3 * a.silo_radius:g} mm, orifice D = "

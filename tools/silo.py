@@ -80,7 +80,8 @@ def silo_scene(x, v, omega, a, hole, radius=None):
 def engine_options(a) -> dict:
     """Simulation keywords of the command line: threads, step_fraction, the contact
     solver's velocity and position sweep caps and over-relaxation (None: the defaults),
-    its shock propagation pass, and substeps (Rules.substeps)."""
+    its shock propagation pass, substeps (Rules.substeps) and sweep caps scaled with the
+    step (Rules.step_scaled_sweeps)."""
     tuning = Tuning()
     if a.relaxation is not None:
         tuning = tuning.with_(relaxation=a.relaxation)
@@ -92,6 +93,8 @@ def engine_options(a) -> dict:
         tuning = tuning.with_(shock_propagation="on")
     if a.substeps is not None:
         tuning = tuning.with_(substeps=a.substeps)
+    if getattr(a, "scaled_sweeps", False):
+        tuning = tuning.with_(step_scaled_sweeps=True)
     return dict(threads=a.threads, step_fraction=a.step_fraction, tuning=tuning)
 
 
@@ -191,6 +194,9 @@ def parse(argv=None):
                    help="drift and impacts in substeps, the contact solver once per step "
                         "(Rules.substeps; default: Rules', on); --no-substeps: one drift "
                         "per solve")
+    p.add_argument("--scaled-sweeps", action="store_true",
+                   help="scale each step's sweep caps with its length "
+                        "(Rules.step_scaled_sweeps)")
     p.add_argument("--write", action="store_true", help="write docs/granular.md's section")
     p.add_argument("--no-write", dest="write", action="store_false")
     p.add_argument("--json", help="also write the results to this JSON file")

@@ -174,9 +174,33 @@ class GaussSeidel:
 
     @ti.func
     def set_tolerances(self):
-        """This step's convergence tolerances (tol_v, tol_w) [m/s] (kernel top level)."""
+        """This step's convergence tolerances (tol_v, tol_w) [m/s] and sweep caps
+        (cap_v, cap_w; plain_v, plain_w: the plain sweeps that end them) (kernel top
+        level)."""
         self.tol_v[None] = ti.static(self.rules.contact_tolerance) * self.impact_speed()
         self.tol_w[None] = self.tol_len[None] / self.params.h[None]
+        self.set_cap(self.cap_v, self.plain_v, ti.static(self.rules.contact_iterations))
+        self.set_cap(self.cap_w, self.plain_w, ti.static(self.rules.position_iterations))
+
+    @ti.func
+    def set_cap(self, cap: ti.template(), plain: ti.template(), full: ti.template()):
+        """This step's sweep cap and plain sweeps of a solve capped at ``full`` sweeps:
+        ``full`` and Rules.plain_sweeps, or with Rules.step_scaled_sweeps both scaled by
+        the step's length over a quiet bed's step h_q = (contact_margin - 1) D /
+        impact speed (the longest step substeps give a bed at rest; quiet_len holds
+        (contact_margin - 1) D [m]): ceil(full h / h_q), within
+        [Rules.min_scaled_sweeps, full], and the plain sweeps in proportion (at least
+        one where plain_sweeps > 0). A sequence of short steps then runs about the
+        sweeps per simulated second of quiet ones, each warm-started from the last."""
+        cap[None] = full
+        plain[None] = self.rules.plain_sweeps
+        if ti.static(self.rules.step_scaled_sweeps):
+            share = self.params.h[None] * self.impact_speed() / self.quiet_len[None]
+            low = min(self.rules.min_scaled_sweeps, full)
+            n = ti.min(ti.max(ti.cast(ti.ceil(full * share), ti.i32), low), full)
+            cap[None] = n
+            if ti.static(self.rules.plain_sweeps > 0):
+                plain[None] = ti.max(1, (self.rules.plain_sweeps * n + full - 1) // full)
 
     @ti.func
     def warm_start_serially(self):
@@ -185,11 +209,11 @@ class GaussSeidel:
             self.sweep_colour(colour, WARM, True, 1.0)
 
     @ti.func
-    def sweep_relaxation(self, it, relaxed, cap):
+    def sweep_relaxation(self, it, relaxed, cap, last):
         """(omega, plain) of sweep ``it`` (from 0) of a solve capped at ``cap`` sweeps:
-        over-relaxed while ``relaxed`` and not among the last Rules.plain_sweeps of the
-        cap, else plain (omega = 1; plain = 1)."""
-        plain = 1 if (relaxed == 0 or it >= cap - ti.static(self.rules.plain_sweeps)) else 0
+        over-relaxed while ``relaxed`` and not among the ``last`` sweeps of the cap
+        (set_cap), else plain (omega = 1; plain = 1)."""
+        plain = 1 if (relaxed == 0 or it >= cap - last) else 0
         omega = ti.cast(1, self.real)
         if plain == 0:
             omega = ti.cast(ti.static(self.rules.relaxation), self.real)
@@ -211,14 +235,17 @@ class GaussSeidel:
         return it, relaxed, done
 
     @ti.func
-    def iterate_serially(self, mode: ti.template(), cap, tol: ti.template()):
+    def iterate_serially(self, mode: ti.template(), caps: ti.template(), last: ti.template(),
+                         tol: ti.template()):
         """Sweeps over every colour until a plain sweep (omega 1) leaves the residual
-        within tol[None], or cap sweeps ran; returns the sweeps run."""
+        within tol[None], or caps[None] sweeps ran, the last last[None] of them plain
+        (set_cap); returns the sweeps run."""
         it = 0
+        cap = caps[None]
         relaxed = 1 if ti.static(self.rules.relaxation != 1) else 0
         done = 0
         while done == 0:
-            omega, plain = self.sweep_relaxation(it, relaxed, cap)
+            omega, plain = self.sweep_relaxation(it, relaxed, cap, last[None])
             self.residual[None] = 0
             for colour in range(self.n_colours_f[None]):
                 self.sweep_colour(colour, mode, True, omega)
@@ -226,7 +253,7 @@ class GaussSeidel:
         return it
 
     @ti.func
-    def begin_batched_sweep(self, first, cap):
+    def begin_batched_sweep(self, first, cap: ti.template(), last: ti.template()):
         """Before a sweep of a batch (kernel top level, one serial task): the solve's
         counters reset if ``first``; unless the solve is done, this sweep's relaxation
         to batch_omega and the residual to 0."""
@@ -238,13 +265,13 @@ class GaussSeidel:
                 self.batch_done[None] = 0
             if self.batch_done[None] == 0:
                 omega, plain = self.sweep_relaxation(
-                    self.batch_it[None], self.batch_relaxed[None], cap)
+                    self.batch_it[None], self.batch_relaxed[None], cap[None], last[None])
                 self.batch_omega[None] = omega
                 self.batch_plain[None] = plain
                 self.residual[None] = 0
 
     @ti.func
-    def end_batched_sweep(self, cap, tol: ti.template()):
+    def end_batched_sweep(self, cap: ti.template(), tol: ti.template()):
         """After a sweep of a batch (one serial task): after_sweep on the batch's
         counters, unless the solve was already done."""
         ti.loop_config(serialize=True)
@@ -252,21 +279,21 @@ class GaussSeidel:
             if self.batch_done[None] == 0:
                 it, relaxed, done = self.after_sweep(
                     self.batch_it[None], self.batch_relaxed[None], self.batch_plain[None],
-                    cap, tol[None])
+                    cap[None], tol[None])
                 self.batch_it[None] = it
                 self.batch_relaxed[None] = relaxed
                 self.batch_done[None] = done
 
     @ti.func
-    def batched_sweep(self, first, mode: ti.template(), colours: ti.template(), cap,
-                      tol: ti.template()):
+    def batched_sweep(self, first, mode: ti.template(), colours: ti.template(),
+                      cap: ti.template(), last: ti.template(), tol: ti.template()):
         """One sweep of iterate_serially's solve, launched by the host several at a
         time before it waits (kernel top level): a serial task deciding the relaxation
         (the solve's counters reset if ``first``), a parallel task per colour (empty once
         the solve is done) and a serial task testing the residual. The same sweeps with
         the same relaxations as iterate_serially, so the same bits; the host waits once
         per batch (batch_result) instead of once per sweep."""
-        self.begin_batched_sweep(first, cap)
+        self.begin_batched_sweep(first, cap, last)
         for colour in ti.static(range(colours)):
             self.sweep_colour(colour, mode, False, 1.0, True)
         self.end_batched_sweep(cap, tol)

@@ -190,6 +190,12 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.tol_w = ti.field(real, shape=())        # pseudo-velocity tolerance [m/s]
         self.n_colours_f = ti.field(ti.i32, shape=())
         self.tol_len = ti.field(real, shape=())      # position tolerance [m] (bind)
+        # this step's sweep caps and plain sweeps (velocity, position: pgs.set_cap)
+        self.cap_v = ti.field(ti.i32, shape=())
+        self.cap_w = ti.field(ti.i32, shape=())
+        self.plain_v = ti.field(ti.i32, shape=())
+        self.plain_w = ti.field(ti.i32, shape=())
+        self.quiet_len = ti.field(real, shape=())    # (contact_margin - 1) D [m] (bind)
         # a batched solve (pgs.batched_sweep): its sweeps so far,
         # over-relaxing still, done; this sweep's omega and plainness
         self.batch_it = ti.field(ti.i32, shape=())
@@ -211,6 +217,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         # a tenth of the overlap tolerance of the smallest contact distance [m]
         self.tol_len[None] = 0.1 * self.rules.overlap_tolerance * 2.0 * float(scene.radius.min())
         self.margin[None] = geom.slack if reach is None else min(geom.slack, reach)
+        # reach = contact_margin D (Simulation._bind): a quiet bed's step moves (margin - 1) D
+        margin = self.rules.contact_margin
+        self.quiet_len[None] = (margin - 1.0) * (self.margin[None] if reach is None else
+                                                 reach) / margin
         self.h_prev[None] = 0
         self.warm_n.fill(0)
         self.state.loaded.fill(0)
@@ -398,13 +408,13 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             if ti.static(self.bounded_warm_start):
                 self.bound_warm_start()
             params.contact_iterations[None] = self.iterate_serially(
-                VELOCITY, ti.static(rules.contact_iterations), self.tol_v)
+                VELOCITY, self.cap_v, self.plain_v, self.tol_v)
             params.contact_residual[None] = self.residual[None]
             if ti.static(self.shock):
                 self.shock_pass()
             self.position_targets()
             params.position_iterations[None] = self.iterate_serially(
-                POSITION, ti.static(rules.position_iterations), self.tol_w)
+                POSITION, self.cap_w, self.plain_w, self.tol_w)
             self.finish()
 
         @ti.kernel
@@ -429,10 +439,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
 
         # and one per mode and colour count for a sweep of a batch (pgs.batched_sweep),
         # which returns nothing: a GPU queues the launches without the host waiting
-        def batched_kernel(mode, colours, cap, tol):
+        def batched_kernel(mode, colours, cap, last, tol):
             @ti.kernel
             def sweep(first: ti.i32):
-                self.batched_sweep(first, mode, colours, cap, tol)
+                self.batched_sweep(first, mode, colours, cap, last, tol)
             return sweep
 
         @ti.kernel
@@ -485,20 +495,20 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             self._sweep(WARM)(1.0)
             if self.bounded_warm_start:
                 self._bound_warm()
-        iterations = self._iterate(VELOCITY, self.rules.contact_iterations, self.tol_v)
+        iterations = self._iterate(VELOCITY, self.cap_v, self.plain_v, self.tol_v)
         self.params.contact_residual[None] = self.residual[None]
         self._middle()
-        positions = self._iterate(POSITION, self.rules.position_iterations, self.tol_w)
+        positions = self._iterate(POSITION, self.cap_w, self.plain_w, self.tol_w)
         self._end(iterations, positions)
 
-    def _iterate(self, mode, cap, tol) -> int:
+    def _iterate(self, mode, caps, last, tol) -> int:
         """iterate_serially with one launch per sweep, each returning its residual, or
         (self.batch > 1) batches of self.batch launches and one wait for whether the
         solve is done (same sweeps, same bits)."""
         if self.batch > 1:
             key = ("batched", mode, self.n_colours)
             if key not in self._sweeps:
-                self._sweeps[key] = self._batched_kernel(mode, self.n_colours, cap, tol)
+                self._sweeps[key] = self._batched_kernel(mode, self.n_colours, caps, last, tol)
             sweep, first = self._sweeps[key], 1
             while True:
                 for _ in range(self.batch):
@@ -507,12 +517,12 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
                 ran = self._batch_result()
                 if ran:
                     return ran
-        limit = tol[None]
+        limit, cap, plain_sweeps = tol[None], caps[None], last[None]
         sweep = self._sweep(mode)
         relaxed = self.rules.relaxation != 1
         it = 0
         while it < cap:
-            plain = not relaxed or it >= cap - self.rules.plain_sweeps
+            plain = not relaxed or it >= cap - plain_sweeps
             residual = sweep(1.0 if plain else self.rules.relaxation)
             it += 1
             if not residual > limit:
