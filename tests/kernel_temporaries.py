@@ -4,8 +4,8 @@ Run as ``python tests/kernel_temporaries.py [no-substeps]``: the scene has gravi
 materials with unequal radii (shock propagation, per-sphere inertia), rolling and
 twisting resistance, a floor with an orifice, a cylinder, a cone and a sink, and every
 loop runs in parallel, the contact solver's sweeps in batches of two per wait (as on
-a GPU: Performance.gpu_sweeps_per_wait); it runs with the default rules and the bounded
-position pass, with ``no-substeps`` also without substeps (then the overlap measure
+a GPU: Performance.gpu_sweeps_per_wait) with their caps scaled to the step
+(Rules.step_scaled_sweeps); it runs with the bounded position pass as well, with ``no-substeps`` also without substeps (then the overlap measure
 over every pair runs).
 Taichi writes the IR to this process's stdout, which tests/test_kernel_temporaries.py
 reads. Not covered: the fused step and the serial solver (CPU-only paths, one task
@@ -51,7 +51,8 @@ def main():
         mode["print_ir_dbg_info"] = False
     tuning = Tuning().with_(serial_solver_below=0, serial_light_below=0,
                             serial_heavy_below=0, bounded_position_pass=True,
-                            sweeps_per_wait=2)   # the batched sweeps of a GPU
+                            sweeps_per_wait=2,   # the batched sweeps of a GPU
+                            step_scaled_sweeps=True)
     if sys.argv[1:] == ["no-substeps"]:
         tuning = tuning.with_(substeps=False)
     sim = ts.Simulation(scene(), threads=2, tuning=tuning, compile_all=True)

@@ -118,7 +118,8 @@ def report(args, rows) -> str:
     extra = "" if args.variants == VARIANTS else \
         " --variants " + " ".join(f'"{v}"' for v in args.variants)
     fills = f"--fills {args.fills}" if args.fills != FILLS else ""
-    section = f"--section {args.section}" if args.section != "settings-tradeoff" else ""
+    name = getattr(args, "section", "settings-tradeoff")
+    section = f"--section {name}" if name != "settings-tradeoff" else ""
     extra = " ".join(x for x in (extra.strip(), fills, section) if x)
     lines = [f"{datetime.date.today()}, {cpu_name()}, 1 thread, f64: `python "
              f"tools/settings_tradeoff.py{' ' + extra if extra else ''}"

@@ -394,7 +394,6 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
 
     def _build_kernels(self):
         """The kernels solve() launches (plain closures: no per-launch `self` dispatch)."""
-        rules = self.rules
         params = self.params
         real = self.real
 
