@@ -204,8 +204,8 @@ class Performance:
         batched_sweep; 1: each sweep returns its residual). A CPU runs each launch to
         its end before the host goes on, so there a batch saves no wait (default 1).
         gpu_sweeps_per_wait: the same on a GPU, which queues the launches while the
-        host goes on, so that the host's wait, not a sweep's work, no longer sets the
-        pace; a solve runs at most this many sweeps past its end, empty ones.
+        host goes on, so that the host waits once per batch instead of after every
+        sweep; a solve ends with at most gpu_sweeps_per_wait - 1 empty launches.
     """
 
     serial_light_below: int = 200_000

@@ -5,8 +5,9 @@ materials with unequal radii (shock propagation, per-sphere inertia), rolling an
 twisting resistance, a floor with an orifice, a cylinder, a cone and a sink, and every
 loop runs in parallel, the contact solver's sweeps in batches of two per wait (as on
 a GPU: Performance.gpu_sweeps_per_wait) with their caps scaled to the step
-(Rules.step_scaled_sweeps); it runs with the bounded position pass as well, with ``no-substeps`` also without substeps (then the overlap measure
-over every pair runs).
+(Rules.step_scaled_sweeps); it runs with the bounded position pass as well. With
+``no-substeps`` it runs without substeps (then the overlap measure over every pair
+runs), with one sweep per wait and full caps (the per-sweep kernels).
 Taichi writes the IR to this process's stdout, which tests/test_kernel_temporaries.py
 reads. Not covered: the fused step and the serial solver (CPU-only paths, one task
 each) and the `optimized` compile mode (the test compiles `fast`; the temporaries
@@ -54,7 +55,7 @@ def main():
                             sweeps_per_wait=2,   # the batched sweeps of a GPU
                             step_scaled_sweeps=True)
     if sys.argv[1:] == ["no-substeps"]:
-        tuning = tuning.with_(substeps=False)
+        tuning = tuning.with_(substeps=False, sweeps_per_wait=1, step_scaled_sweeps=False)
     sim = ts.Simulation(scene(), threads=2, tuning=tuning, compile_all=True)
     sim.advance(0.02)
 

@@ -7,7 +7,8 @@ relative velocity (separating > 0), lambda = max(lambda + omega m_eff (target - 
 0) and the change applied to both spheres (Rules.relaxation = omega, 1.8 by default).
 Over-relaxed sweeps (omega != 1) overshoot: a solve stops only after a plain sweep
 (omega = 1) left every row within tolerance, and the last Rules.plain_sweeps sweeps of
-the cap run plain, so a solve stopped at its cap does not keep the overshoot.
+the cap run plain, so a solve stopped at its cap does not keep the overshoot (with
+Rules.step_scaled_sweeps, cap and plain sweeps scaled to the step: set_cap).
 
 A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 """
@@ -187,15 +188,18 @@ class GaussSeidel:
         """This step's sweep cap and plain sweeps of a solve capped at ``full`` sweeps:
         ``full`` and Rules.plain_sweeps, or with Rules.step_scaled_sweeps both scaled by
         the step's length over a quiet bed's step h_q = (contact_margin - 1) D /
-        impact speed (the longest step substeps give a bed at rest; quiet_len holds
-        (contact_margin - 1) D [m]): ceil(full h / h_q), within
+        impact speed (the bound substeps put on a held bed's step; quiet_len holds
+        (contact_margin - 1) D [m], 0 where unknown: the full caps): ceil(full h / h_q), within
         [Rules.min_scaled_sweeps, full], and the plain sweeps in proportion (at least
         one where plain_sweeps > 0). A sequence of short steps then runs about the
         sweeps per simulated second of quiet ones, each warm-started from the last."""
         cap[None] = full
         plain[None] = self.rules.plain_sweeps
         if ti.static(self.rules.step_scaled_sweeps):
-            share = self.params.h[None] * self.impact_speed() / self.quiet_len[None]
+            share = ti.cast(1, self.real)      # quiet_len 0 (unknown): the full caps
+            if self.quiet_len[None] > 0:
+                share = ti.min(self.params.h[None] * self.impact_speed() /
+                               self.quiet_len[None], 1)
             low = min(self.rules.min_scaled_sweeps, full)
             n = ti.min(ti.max(ti.cast(ti.ceil(full * share), ti.i32), low), full)
             cap[None] = n

@@ -44,7 +44,8 @@ thread, it sweeps a few cells of a colour interleaved, the same bits:
 pgs.sweep_cells). Iterations stop when no row changed a velocity by more than
 ``Rules.contact_tolerance`` x the impact speed (or the positions by more than a tenth
 of ``Rules.overlap_tolerance`` of the smallest diameter), at most
-``Rules.contact_iterations`` / ``position_iterations``.
+``Rules.contact_iterations`` / ``position_iterations`` (with
+``Rules.step_scaled_sweeps``, caps scaled to the step: pgs.set_cap).
 
 A mixin-free class over the engine's state, grid, parameters and pair geometry.
 """
@@ -190,24 +191,29 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.tol_w = ti.field(real, shape=())        # pseudo-velocity tolerance [m/s]
         self.n_colours_f = ti.field(ti.i32, shape=())
         self.tol_len = ti.field(real, shape=())      # position tolerance [m] (bind)
+        self._allocate_sweep_control()
+        self._allocate_warm_energy(cap, k)
+        if self.bounded_position_pass:
+            self._allocate_position_energy()
+        if self.shock:
+            self._allocate_shock()
+
+    def _allocate_sweep_control(self):
+        """0-d fields that steer a solve's sweeps: this step's caps (pgs.set_cap) and
+        a batched solve's state (pgs.batched_sweep)."""
         # this step's sweep caps and plain sweeps (velocity, position: pgs.set_cap)
         self.cap_v = ti.field(ti.i32, shape=())
         self.cap_w = ti.field(ti.i32, shape=())
         self.plain_v = ti.field(ti.i32, shape=())
         self.plain_w = ti.field(ti.i32, shape=())
-        self.quiet_len = ti.field(real, shape=())    # (contact_margin - 1) D [m] (bind)
+        self.quiet_len = ti.field(self.real, shape=())    # (contact_margin - 1) D [m] (bind)
         # a batched solve (pgs.batched_sweep): its sweeps so far,
         # over-relaxing still, done; this sweep's omega and plainness
         self.batch_it = ti.field(ti.i32, shape=())
         self.batch_relaxed = ti.field(ti.i32, shape=())
         self.batch_done = ti.field(ti.i32, shape=())
         self.batch_plain = ti.field(ti.i32, shape=())
-        self.batch_omega = ti.field(real, shape=())
-        self._allocate_warm_energy(cap, k)
-        if self.bounded_position_pass:
-            self._allocate_position_energy()
-        if self.shock:
-            self._allocate_shock()
+        self.batch_omega = ti.field(self.real, shape=())
 
     def bind(self, scene, geom, reach=None):
         """Load a scene's grid geometry ``geom`` (colours; the speculative margin: the
@@ -217,10 +223,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         # a tenth of the overlap tolerance of the smallest contact distance [m]
         self.tol_len[None] = 0.1 * self.rules.overlap_tolerance * 2.0 * float(scene.radius.min())
         self.margin[None] = geom.slack if reach is None else min(geom.slack, reach)
-        # reach = contact_margin D (Simulation._bind): a quiet bed's step moves (margin - 1) D
+        # reach = contact_margin D (Simulation._bind): a held bed's step moves at most
+        # (contact_margin - 1) D; without reach it is unknown (0: pgs.set_cap's full caps)
         margin = self.rules.contact_margin
-        self.quiet_len[None] = (margin - 1.0) * (self.margin[None] if reach is None else
-                                                 reach) / margin
+        self.quiet_len[None] = 0.0 if reach is None else max(margin - 1.0, 0.0) * reach / margin
         self.h_prev[None] = 0
         self.warm_n.fill(0)
         self.state.loaded.fill(0)
@@ -395,7 +401,6 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
     def _build_kernels(self):
         """The kernels solve() launches (plain closures: no per-launch `self` dispatch)."""
         params = self.params
-        real = self.real
 
         @ti.kernel
         def solve_serial():
@@ -424,6 +429,32 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             self.prepare_rows()
             return self.n_rows[None]
 
+        self._build_sweep_kernels()
+
+        @ti.kernel
+        def bound_warm():
+            self.bound_warm_start()
+
+        @ti.kernel
+        def middle():
+            if ti.static(self.shock):
+                self.shock_pass()
+            self.position_targets()
+
+        @ti.kernel
+        def end(iterations: ti.i32, positions: ti.i32):
+            params.contact_iterations[None] = iterations
+            params.position_iterations[None] = positions
+            self.finish()
+
+        self._solve_serial = solve_serial
+        self._start, self._middle, self._end = start, middle, end
+        self._bound_warm = bound_warm
+
+    def _build_sweep_kernels(self):
+        """The kernel factories of the parallel sweeps (built per mode and colour count
+        on first use: _sweep, _iterate) and batch_result."""
+        real = self.real
         # one kernel per mode and colour count (a template argument costs Python
         # dispatch per launch): a launch is one sweep, every colour in turn (each
         # colour's loop a parallel task of its own), and returns the residual
@@ -452,26 +483,6 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self._batched_kernel = batched_kernel
         self._batch_result = batch_result
         self._sweeps = {}
-
-        @ti.kernel
-        def bound_warm():
-            self.bound_warm_start()
-
-        @ti.kernel
-        def middle():
-            if ti.static(self.shock):
-                self.shock_pass()
-            self.position_targets()
-
-        @ti.kernel
-        def end(iterations: ti.i32, positions: ti.i32):
-            params.contact_iterations[None] = iterations
-            params.position_iterations[None] = positions
-            self.finish()
-
-        self._solve_serial = solve_serial
-        self._start, self._middle, self._end = start, middle, end
-        self._bound_warm = bound_warm
 
     def _sweep(self, mode):
         """The one-sweep kernel of ``mode`` for the bound colour count (built once)."""
