@@ -93,7 +93,7 @@ def engine_options(a) -> dict:
         tuning = tuning.with_(shock_propagation="on")
     if a.substeps is not None:
         tuning = tuning.with_(substeps=a.substeps)
-    if getattr(a, "scaled_sweeps", False):
+    if a.scaled_sweeps:
         tuning = tuning.with_(step_scaled_sweeps=True)
     return dict(threads=a.threads, step_fraction=a.step_fraction, tuning=tuning)
 

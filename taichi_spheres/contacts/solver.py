@@ -484,11 +484,13 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self._batch_result = batch_result
         self._sweeps = {}
 
-    def _sweep(self, mode):
-        """The one-sweep kernel of ``mode`` for the bound colour count (built once)."""
-        key = (mode, self.n_colours)
+    def _sweep(self, mode, batched=None):
+        """The one-sweep kernel of ``mode`` for the bound colour count (built once);
+        ``batched``: (caps, last, tol) of a batched solve, whose sweep kernel it is."""
+        key = (mode, self.n_colours, batched is not None)
         if key not in self._sweeps:
-            self._sweeps[key] = self._sweep_kernel(mode, self.n_colours)
+            self._sweeps[key] = (self._sweep_kernel(mode, self.n_colours) if batched is None
+                                 else self._batched_kernel(mode, self.n_colours, *batched))
         return self._sweeps[key]
 
     def solve(self) -> None:
@@ -516,10 +518,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         (self.batch > 1) batches of self.batch launches and one wait for whether the
         solve is done (same sweeps, same bits)."""
         if self.batch > 1:
-            key = ("batched", mode, self.n_colours)
-            if key not in self._sweeps:
-                self._sweeps[key] = self._batched_kernel(mode, self.n_colours, caps, last, tol)
-            sweep, first = self._sweeps[key], 1
+            sweep, first = self._sweep(mode, (caps, last, tol)), 1
             while True:
                 for _ in range(self.batch):
                     sweep(first)
