@@ -85,7 +85,7 @@ def test_step_overlaps_table_names_the_command_and_both_settings():
         "| 4.70e-06 |" in text
     assert "| former defaults | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 3000 |" in text
     assert "- former defaults: `Tuning().with_(relaxation=1.0, position_iterations=100, " \
-        "substeps=False)`" in text
+        "substeps=False, step_scaled_sweeps=False)`" in text
 
 
 def test_step_overlaps_and_settings_tradeoff_name_their_variants():
@@ -98,12 +98,14 @@ def test_step_overlaps_and_settings_tradeoff_name_their_variants():
         step_overlaps.parse_variant("fast=relaxation")
     args = argparse.Namespace(variants=["a=relaxation=1.5"], every=1, write=False, fills=3)
     row = dict(wall=0.9, brute=5e-5, velocity=60.0, position=58.0, kinetic=2e-6, ball=1e-3,
-               ball_step=1, rise=0.0, fills=(1.1, 0.95, 1.3, 450))
+               ball_step=1, rise=0.0,
+               fills=dict(bed=1.1, fastest=0.95, slowest=1.3, steps=450, fall=4.2,
+                          kinetic=[3e-6, 5e-7, 8e-7]))
     text = settings_tradeoff.report(args, {"a": row})
     assert '`python tools/settings_tradeoff.py --variants "a=relaxation=1.5" --fills 3`' \
         in text
-    assert "| a | 0.9 | 1.1 (0.95-1.3) | 5.00e-05 | 60 / 58 | 2.0e-06 | 1.0e-03 (1) | " \
-        "0.0e+00 |" in text
+    assert "| a | 0.9 | 1.1 (0.95-1.3) | 5.00e-05 | 60 / 58 | 2.0e-06 | " \
+        "8.0e-07 (5.0e-07-3.0e-06), 2 of 3 | 4.2 | 1.0e-03 (1) | 0.0e+00 |" in text
     assert "- a: `Tuning().with_(relaxation=1.5)`" in text
 
 

@@ -6,7 +6,8 @@ its final positions and velocities are hashed (``observe.state_digest``). The di
 in ``tests/same_bits.json`` were computed by ``python tools/state_digest.py --write``;
 every CPU (any x86-64 model, with or without AVX-512 and FMA; ARM), both compile
 modes, the fused step and the per-colour parallel launches must reproduce them (the
-"plain" case: the small one with plain sweeps at 100 / 100 and no substeps). A
+"plain" case: the small one with plain sweeps at 100 / 100, the full caps in every
+step and no substeps). A
 change of the physics changes them on purpose: store the new ones with that command
 and say why in the commit.
 

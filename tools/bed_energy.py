@@ -41,7 +41,7 @@ LAMMPS_JSON = os.path.join(ROOT, "docs", "peer_lammps_pour_lammps.json")
 def bed_phase(scene, at_t1, vel: int, pos: int, omega: float) -> dict:
     """Kinetic energy at TIMES [J], velocity sweeps per step, wall s per simulated s."""
     tuning = Tuning().with_(contact_iterations=vel, position_iterations=pos, relaxation=omega,
-                            substeps=False)
+                            substeps=False, step_scaled_sweeps=False)
     sim = ts.Simulation(scene, threads=1, tuning=tuning)
     sim.restore(at_t1)
     sim.step(sim.max_step())         # compiles this setting's kernels (not timed)

@@ -140,7 +140,7 @@ def bed_with_caps(p, variants):
     for var in variants:
         tuning = Tuning().with_(contact_iterations=var.vel, position_iterations=var.pos,
                                 shock_propagation=var.shock, relaxation=var.omega,
-                                substeps=False)
+                                substeps=False, step_scaled_sweeps=False)
         sim = ts.Simulation(p["scene"], tuning=tuning, step_fraction=var.step_fraction)
         sim.restore(dict(p["at_t1"], step_fraction=var.step_fraction))
         growth = {}
@@ -168,7 +168,8 @@ def column(ratio: float, seconds: float, warm_start=True, shock="auto", omega=1.
                                  restitution=0.5, wall_restitution=0.5)
     sim = ts.Simulation(scene, tuning=Tuning().with_(warm_start=warm_start,
                                                      shock_propagation=shock, relaxation=omega,
-                                                     substeps=False, position_iterations=100))
+                                                     substeps=False, position_iterations=100,
+                                                     step_scaled_sweeps=False))
     sim.advance(seconds - 0.5)
     _, c = window(sim, seconds)
     st = sim.state()
@@ -191,7 +192,8 @@ RELAXED = "relaxation 1.8, 70 / 50 sweeps"
 
 #: the contact solver's defaults before over-relaxation and substeps (CHANGELOG)
 FORMER = "former defaults: plain, 100 / 100, no substeps"
-FORMER_DEFAULTS = dict(relaxation=1.0, position_iterations=100, substeps=False)
+FORMER_DEFAULTS = dict(relaxation=1.0, position_iterations=100, substeps=False,
+                       step_scaled_sweeps=False)
 
 #: --bed-settings: short names of the FCC bed rows' settings
 BED_SETTINGS = {"defaults": "defaults", "fast": FAST, "shock": "shock propagation on",

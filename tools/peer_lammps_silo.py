@@ -17,7 +17,7 @@ seconds per simulated second of the discharge, and their ratios.
     python tools/peer_lammps_silo.py --step-fraction 0.3 --sweeps 30 --write --section lammps-coarse
     python tools/peer_lammps_silo.py --step-fraction 0.3 --sweeps 10 --position-sweeps 10 \
         --shock --write --section lammps-shock
-    python tools/peer_lammps_silo.py --scaled-sweeps --write --section lammps-scaled
+    python tools/peer_lammps_silo.py --no-scaled-sweeps   # the full caps in every step
 """
 from __future__ import annotations
 
@@ -93,6 +93,9 @@ def main(argv=None):
     l_times, l_mass, l_wall, l_count, version = lammps_run(a, x)
     rows[version] = (silo.steady_rate(l_times, l_mass, total, a.transient)[0], l_count,
                      l_wall / a.duration)
+    caps_text = (", sweep caps scaled with the step"
+                 if silo.engine_options(a)["tuning"].physics.step_scaled_sweeps
+                 else ", full sweep caps")
     lines = [f"Measured {datetime.date.today()} on {cpu_name()}, 1 thread each: "
              f"`python tools/peer_lammps_silo.py {' '.join(x for x in argv if x != '--write')}`".rstrip()
              + (f" (taichi_spheres: step_fraction {a.step_fraction:g}, velocity / position "
@@ -100,7 +103,7 @@ def main(argv=None):
                 f"{a.position_sweeps or Rules().position_iterations}"
                 f", relaxation {a.relaxation if a.relaxation is not None else Rules().relaxation:g}"
                 f"{', shock propagation' if a.shock else ''}"
-                f"{', sweep caps scaled with the step' if a.scaled_sweeps else ''}"
+                f"{caps_text}"
                 f"{', substeps' if silo.engine_options(a)['tuning'].physics.substeps else ', no substeps'})"),
              "", f"{n} spheres of d = {2e3 * a.radius:g} mm (2500 kg/m^3, e = 0.5, mu = "
                  f"{a.mu}), silo radius {1e3 * a.silo_radius:g} mm, orifice D = "

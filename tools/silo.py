@@ -93,8 +93,8 @@ def engine_options(a) -> dict:
         tuning = tuning.with_(shock_propagation="on")
     if a.substeps is not None:
         tuning = tuning.with_(substeps=a.substeps)
-    if a.scaled_sweeps:
-        tuning = tuning.with_(step_scaled_sweeps=True)
+    if a.scaled_sweeps is not None:
+        tuning = tuning.with_(step_scaled_sweeps=a.scaled_sweeps)
     return dict(threads=a.threads, step_fraction=a.step_fraction, tuning=tuning)
 
 
@@ -194,9 +194,10 @@ def parse(argv=None):
                    help="drift and impacts in substeps, the contact solver once per step "
                         "(Rules.substeps; default: Rules', on); --no-substeps: one drift "
                         "per solve")
-    p.add_argument("--scaled-sweeps", action="store_true",
+    p.add_argument("--scaled-sweeps", action=argparse.BooleanOptionalAction, default=None,
                    help="scale each step's sweep caps with its length "
-                        "(Rules.step_scaled_sweeps)")
+                        "(Rules.step_scaled_sweeps; default: Rules', on); "
+                        "--no-scaled-sweeps: the full caps in every step")
     p.add_argument("--write", action="store_true", help="write docs/granular.md's section")
     p.add_argument("--no-write", dest="write", action="store_false")
     p.add_argument("--json", help="also write the results to this JSON file")

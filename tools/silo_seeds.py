@@ -40,7 +40,8 @@ from machine import cpu_name, write_section  # noqa: E402
 
 #: --variants default: NAME=OPTIONS (tools/silo.py options)
 #: the defaults, and the former ones (plain sweeps at 100 / 100, no substeps)
-VARIANTS = ["defaults=", "former defaults=--relaxation 1.0 --position-sweeps 100 --no-substeps"]
+VARIANTS = ["defaults=", "former defaults=--relaxation 1.0 --position-sweeps 100 --no-substeps "
+            "--no-scaled-sweeps"]
 #: the row name of LAMMPS's rates (--lammps)
 LAMMPS = "LAMMPS"
 

@@ -80,7 +80,8 @@ from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
 #: the settings capture() runs with by default: plain sweeps without substeps, as the
 #: numpy sweeps here (pgs) and the figures of docs/bench.md (the contact solver's
 #: former defaults)
-FORMER = dict(relaxation=1.0, substeps=False, position_iterations=100)
+FORMER = dict(relaxation=1.0, substeps=False, position_iterations=100,
+              step_scaled_sweeps=False)
 
 
 def capture(scene_path: str, at: float, changes=None) -> dict:

@@ -8,12 +8,11 @@ colour launches. This script runs ``builders.same_bits_scene(n)`` for each case 
 the floor; "large": 3,000 spheres, where detection keeps near lists and sweeps can
 launch per colour; "frictional": the small case with friction, spin and a post of
 static geometry; "materials": the frictional case with every other sphere of a
-second material; "plain": the small case with plain Gauss-Seidel sweeps at 100 / 100
-and no substeps, the contact solver's former defaults) and prints the digest of the
-final positions and velocities
-(``observe.state_digest``) with the collision counts, for each path asked for, and
-whether it matches the digest stored there (``tests/test_same_bits.py`` holds the
-engine to it).
+second material; "plain": the small case with plain Gauss-Seidel sweeps at 100 / 100,
+the full caps in every step and no substeps, the contact solver's former defaults)
+and prints the digest of the final positions and velocities (``observe.state_digest``)
+with the collision counts, for each path asked for, and whether it matches the digest
+stored there (``tests/test_same_bits.py`` holds the engine to it).
 
     python tools/state_digest.py                          # both cases, f64 and f32
     python tools/state_digest.py --paths default fused parallel --compile optimized

@@ -101,9 +101,10 @@ def report(args, rows) -> str:
 
 
 #: --variants default: NAME=CHANGES (blank-separated Tuning field=value pairs)
-#: the defaults, and the former ones (plain sweeps at 100 / 100, no substeps)
+#: the defaults, and the former ones (plain sweeps at 100 / 100, no substeps, full caps)
 VARIANTS = ["defaults=",
-            "former defaults=relaxation=1.0 position_iterations=100 substeps=False"]
+            "former defaults=relaxation=1.0 position_iterations=100 substeps=False "
+            "step_scaled_sweeps=False"]
 
 
 def parse_variant(text: str) -> tuple:
