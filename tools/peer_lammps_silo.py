@@ -93,9 +93,9 @@ def main(argv=None):
     l_times, l_mass, l_wall, l_count, version = lammps_run(a, x)
     rows[version] = (silo.steady_rate(l_times, l_mass, total, a.transient)[0], l_count,
                      l_wall / a.duration)
-    caps_text = (", sweep caps scaled with the step"
-                 if silo.engine_options(a)["tuning"].physics.step_scaled_sweeps
-                 else ", full sweep caps")
+    physics = silo.engine_options(a)["tuning"].physics
+    caps_text = ", sweep caps scaled with the step" if physics.step_scaled_sweeps \
+        else ", full sweep caps"
     lines = [f"Measured {datetime.date.today()} on {cpu_name()}, 1 thread each: "
              f"`python tools/peer_lammps_silo.py {' '.join(x for x in argv if x != '--write')}`".rstrip()
              + (f" (taichi_spheres: step_fraction {a.step_fraction:g}, velocity / position "
@@ -104,7 +104,7 @@ def main(argv=None):
                 f", relaxation {a.relaxation if a.relaxation is not None else Rules().relaxation:g}"
                 f"{', shock propagation' if a.shock else ''}"
                 f"{caps_text}"
-                f"{', substeps' if silo.engine_options(a)['tuning'].physics.substeps else ', no substeps'})"),
+                f"{', substeps' if physics.substeps else ', no substeps'})"),
              "", f"{n} spheres of d = {2e3 * a.radius:g} mm (2500 kg/m^3, e = 0.5, mu = "
                  f"{a.mu}), silo radius {1e3 * a.silo_radius:g} mm, orifice D = "
                  f"{own.orifice:g} d, settled {a.settle} s, discharge {a.duration} s, rate "
