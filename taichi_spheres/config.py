@@ -207,6 +207,11 @@ class Performance:
         gpu_sweeps_per_wait: the same on a GPU, which queues the launches while the
         host goes on, so that the host waits once per batch instead of after every
         sweep; a solve ends with at most gpu_sweeps_per_wait - 1 empty launches.
+    discharge_in_place: when a sink takes spheres out, move the remaining spheres'
+        contact state (warm-start table, loaded and near flags) down in the engine's
+        fields and load only what changed (discharge.py; Engine.keep_spheres), instead
+        of reading every table to the host and loading the scene again (False; a GPU
+        always does that: the move is one serial loop).
     """
 
     serial_light_below: int = 200_000
@@ -232,6 +237,7 @@ class Performance:
     parallel_interleave: int = 1
     sweeps_per_wait: int = 1
     gpu_sweeps_per_wait: int = 8
+    discharge_in_place: bool = True
 
     def __post_init__(self):
         """ValueError naming the field: solver_interleave, parallel_interleave or a
@@ -262,6 +268,18 @@ class Tuning:
             groups[group][name] = type(default)(value)
         return Tuning(physics=dataclasses.replace(self.physics, **groups["physics"]),
                       performance=dataclasses.replace(self.performance, **groups["performance"]))
+
+    def compiled(self) -> "Tuning":
+        """This Tuning with the options no kernel reads (HOST_ONLY) at their defaults:
+        what an engine's kernels compile in (engine.EngineKey), so that Simulations
+        differing only in those share compiled engines."""
+        return dataclasses.replace(self, performance=dataclasses.replace(
+            self.performance, **{name: getattr(Performance(), name) for name in HOST_ONLY}))
+
+
+#: Performance options that only the host reads (Simulation): they do not enter the
+#: compiled engines' key (Tuning.compiled)
+HOST_ONLY = ("discharge_in_place",)
 
 
 def field_types() -> dict:

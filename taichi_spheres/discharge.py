@@ -5,7 +5,8 @@ The step counts the spheres in sinks at the end of its drift (params.in_sinks, r
 back with the other counters); when there are some, :func:`discharge` removes them
 on the host and the Simulation continues with the remaining spheres on the same
 engine (its fields hold up to their capacity; the contact solver's warm start is
-renumbered so that the remaining contacts keep their impulses). Numpy only.
+renumbered so that the remaining contacts keep their impulses: in the engine's fields,
+contacts/warm_table.py, or on the host, renumber_warm). Numpy only.
 """
 from __future__ import annotations
 
@@ -13,8 +14,12 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["Discharged", "in_sinks", "discharge", "renumber_warm", "free_spots"]
+__all__ = ["Discharged", "in_sinks", "discharge", "renumber_warm", "free_spots",
+           "DROPPED_PARTNER"]
 
+#: warm_key of a warm-start row whose partner a sink took out: no sphere's index and no
+#: wall's, so no row matches it again
+DROPPED_PARTNER = -(2 ** 30)
 #: tries per recycled sphere to find a free spot at the top of the domain
 SPOT_TRIES = 200
 
@@ -88,7 +93,7 @@ def renumber_warm(warm: dict | None, keep: np.ndarray) -> dict | None:
     pair = used & (key >= 0) & (key < len(keep))
     partner = np.where(pair, key, 0)
     alive = keep[partner] | ~pair
-    out["key"] = np.where(pair, np.where(alive, new_index[partner], -(2 ** 30)), key)
+    out["key"] = np.where(pair, np.where(alive, new_index[partner], DROPPED_PARTNER), key)
     return out
 
 

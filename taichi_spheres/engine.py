@@ -172,6 +172,21 @@ class Engine:
                 self.solver.load_warm(warm)
         self._occupant = weakref.ref(sim)
 
+    def keep_spheres(self, sim, x, v, omega, kept, reach=None) -> None:
+        """After a sink took spheres out of ``sim`` (bound here): load ``sim.scene``, the
+        spheres that stay, with their x, v, omega [(n, 3)], and move their contact
+        solver's warm start down to their new indices (``kept``: (n_before,) bool, or
+        None: every sphere stayed, some moved). The same fields as bind with the
+        renumbered table (discharge.renumber_warm), without the host round trip of the
+        tables and the scene's constants (box, materials, geometry, sinks, grid)."""
+        if not self.bound_to(sim):
+            raise RuntimeError("keep_spheres: the Simulation is not the one bound here")
+        scene = sim.scene
+        self.state.bind(scene, x, v, omega)
+        self.contacts.bind(scene, sim.geometry)
+        if self.solver is not None:
+            self.solver.keep_spheres(scene, sim.geometry, reach, kept)
+
 
 #: A new engine has room for at least this many spheres and cells (small scenes share
 #: one engine; a few hundred kB of fields).

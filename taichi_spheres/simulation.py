@@ -342,7 +342,7 @@ class Simulation:
         precision and settings (ValueError otherwise). A scene with sinks continues
         with the spheres the checkpoint kept."""
         if ckpt["n"] != self.n and getattr(self.scene, "sinks", ()) and "radius" in ckpt:
-            self._keep_spheres(ckpt)
+            self._load_checkpoint_spheres(ckpt)
         for key in ("n", "precision", "step_fraction", "max_sweeps"):
             mine = getattr(self, key)
             if ckpt[key] != mine:
@@ -453,7 +453,7 @@ class Simulation:
             self._discharge()
         return c.length
 
-    def _keep_spheres(self, ckpt: dict) -> None:
+    def _load_checkpoint_spheres(self, ckpt: dict) -> None:
         """Continue with the spheres of a checkpoint taken after a discharge (their
         materials those of the original scene's spheres of the same ids)."""
         ids = np.asarray(ckpt.get("sphere_ids", np.arange(len(ckpt["mass"]))))
@@ -472,10 +472,15 @@ class Simulation:
 
     def _discharge(self):
         """Take the spheres in sinks out (discharge.py) and continue with the others on
-        the same engine (the fields are loaded again, warm start renumbered)."""
+        the same engine: their warm start moved down in the fields (Engine.keep_spheres;
+        on the CPU with Performance.discharge_in_place), or every table read to the
+        host, renumbered there and loaded again with the scene (the same bits)."""
         dtype = np.float64 if self.precision == "f64" else np.float32
+        # (the move is one serial loop: a GPU reloads through the host instead)
+        in_place = self.tuning.performance.discharge_in_place and self.runtime.is_cpu
         scene, rows, warm, gone = discharge.discharge(
-            self.scene, self._engine.state.rows(), self._warm_rows(), dtype, self._sink_rng)
+            self.scene, self._engine.state.rows(), None if in_place else self._warm_rows(),
+            dtype, self._sink_rng)
         t = self._totals
         t["discharged"] += gone.count
         t["discharged_mass"] += gone.mass
@@ -483,12 +488,17 @@ class Simulation:
         if gone.kept is not None:
             self.sphere_ids = self.sphere_ids[gone.kept]
         self.scene = scene
-        self._parked = rows + (warm,)
-        self._engine.release(self)
         if scene.n == 0:           # every sphere has left: time still runs, nothing moves
+            self._engine.release(self)
+            self._parked = rows + (warm,)
             self._vmax2 = self._vmax2_near = 0.0
             return
-        self._bind()
+        if in_place:
+            self._engine.keep_spheres(self, *rows, gone.kept, self._reach())
+        else:
+            self._parked = rows + (warm,)
+            self._engine.release(self)
+            self._bind()
         near = self._vmax2_near
         self._measure_vmax()
         # fewer spheres (and recycled ones at rest): the bound can only go down
@@ -535,16 +545,21 @@ class Simulation:
             generation=self.runtime.generation,
             real=ti.f64 if self.precision == "f64" else ti.f32, features=self.features,
             serial_light=schedule.serial_light, serial_heavy=schedule.serial_heavy,
-            serial_few=schedule.serial_few, near_lists=schedule.near_lists, tuning=self.tuning)
+            serial_few=schedule.serial_few, near_lists=schedule.near_lists,
+            tuning=self.tuning.compiled())
 
     def _bind(self):
         """Load this Simulation into its engine's fields unless it is the one they hold."""
         if not self._engine.bound_to(self):
             x, v, omega, warm = self._parked
-            reach = self.tuning.physics.contact_margin * self.step_fraction * \
-                float(self.scene.radius.min())
-            self._engine.bind(self, x, v, self.geometry, self.rest_speed, warm, omega, reach)
+            self._engine.bind(self, x, v, self.geometry, self.rest_speed, warm, omega,
+                              self._reach())
             self._parked = None
+
+    def _reach(self) -> float:
+        """The contact rows' reach [m]: contact_margin x D of the smallest sphere left."""
+        return self.tuning.physics.contact_margin * self.step_fraction * \
+            float(self.scene.radius.min())
 
     def _park(self):
         """Keep positions, velocities and the contact solver's warm start on the host:

@@ -58,7 +58,7 @@ import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.builders import ball_on_block, fcc_block  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from taichi_spheres.simulation import DEFAULT_STEP_FRACTION  # noqa: E402
-from machine import cpu_name, hardware, publish, untimed_pass  # noqa: E402  (tools/machine.py)
+from machine import FORMER_DEFAULTS, cpu_name, hardware, publish, untimed_pass  # noqa: E402
 
 G = 9.81
 
@@ -192,8 +192,6 @@ RELAXED = "relaxation 1.8, 70 / 50 sweeps"
 
 #: the contact solver's defaults before over-relaxation and substeps (CHANGELOG)
 FORMER = "former defaults: plain, 100 / 100, no substeps"
-FORMER_DEFAULTS = dict(relaxation=1.0, position_iterations=100, substeps=False,
-                       step_scaled_sweeps=False)
 
 #: --bed-settings: short names of the FCC bed rows' settings
 BED_SETTINGS = {"defaults": "defaults", "fast": FAST, "shock": "shock propagation on",

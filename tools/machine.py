@@ -86,3 +86,36 @@ def publish(text: str, section: str, write: bool) -> None:
     if write:
         write_section(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "docs",
                                    "bench.md"), section, text)
+
+
+def tuning_args(items, ap) -> dict:
+    """--tuning NAME=VALUE items as Tuning.with_ keywords (values as Python literals:
+    numbers and True/False, else strings); an error naming a bad item."""
+    import ast
+    from taichi_spheres.config import Tuning
+    out = {}
+    for item in items or ():
+        name, sep, text = item.partition("=")
+        if not sep:
+            ap.error(f"--tuning {item!r}: write NAME=VALUE")
+        try:
+            out[name] = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            out[name] = text
+    try:
+        Tuning().with_(**out)
+    except ValueError as exc:
+        ap.error(f"--tuning: {exc}")
+    return out
+
+
+#: the contact solver's former defaults (CHANGELOG): plain sweeps (no over-relaxation), at
+#: most 100 velocity (as now) and 100 position sweeps, the full caps in every step, no
+#: substeps (Tuning.with_ keywords); the tools' "former defaults" variants run them
+FORMER_DEFAULTS = dict(relaxation=1.0, position_iterations=100, substeps=False,
+                       step_scaled_sweeps=False)
+
+
+def tuning_text(changes: dict) -> str:
+    """Tuning.with_ keywords as blank-separated NAME=VALUE items (--tuning's form)."""
+    return " ".join(f"{name}={value}" for name, value in changes.items())

@@ -79,6 +79,8 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
+from machine import tuning_args  # noqa: E402  (tools/machine.py; --tuning)
+
 RADIUS = 0.015       # m
 DENSITY = 1000.0     # kg/m^3
 SPACING = 0.1        # m
@@ -878,27 +880,6 @@ def scene_args(args, ap):
     if args.out is None:
         args.out = args.default_out
     return scene
-
-
-def tuning_args(items, ap) -> dict:
-    """--tuning NAME=VALUE items as Tuning.with_ keywords (values as Python literals:
-    numbers and True/False, else strings); an error naming a bad item."""
-    import ast
-    from taichi_spheres.config import Tuning
-    out = {}
-    for item in items or ():
-        name, sep, text = item.partition("=")
-        if not sep:
-            ap.error(f"--tuning {item!r}: write NAME=VALUE")
-        try:
-            out[name] = ast.literal_eval(text)
-        except (ValueError, SyntaxError):
-            out[name] = text
-    try:
-        Tuning().with_(**out)
-    except ValueError as exc:
-        ap.error(f"--tuning: {exc}")
-    return out
 
 
 def same_machine(saved, args, ap):

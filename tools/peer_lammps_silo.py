@@ -37,7 +37,6 @@ sys.path.insert(0, HERE)
 import lammps_silo  # noqa: E402  (tools/lammps_silo.py)
 import silo  # noqa: E402  (tools/silo.py)
 from machine import cpu_name, write_section  # noqa: E402
-from taichi_spheres.config import Rules  # noqa: E402
 
 
 #: the silo both codes run (tools/silo.py options; more on the command line)
@@ -99,10 +98,10 @@ def main(argv=None):
     lines = [f"Measured {datetime.date.today()} on {cpu_name()}, 1 thread each: "
              f"`python tools/peer_lammps_silo.py {' '.join(x for x in argv if x != '--write')}`".rstrip()
              + (f" (taichi_spheres: step_fraction {a.step_fraction:g}, velocity / position "
-                f"sweeps at most {a.sweeps or Rules().contact_iterations} / "
-                f"{a.position_sweeps or Rules().position_iterations}"
-                f", relaxation {a.relaxation if a.relaxation is not None else Rules().relaxation:g}"
-                f"{', shock propagation' if a.shock else ''}"
+                f"sweeps at most {physics.contact_iterations} / "
+                f"{physics.position_iterations}"
+                f", relaxation {physics.relaxation:g}"
+                f"{', shock propagation' if physics.shock_propagation == 'on' else ''}"
                 f"{caps_text}"
                 f"{', substeps' if physics.substeps else ', no substeps'})"),
              "", f"{n} spheres of d = {2e3 * a.radius:g} mm (2500 kg/m^3, e = 0.5, mu = "

@@ -45,15 +45,14 @@ sys.path.insert(0, HERE)
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.builders import fcc_block  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
-from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
+from machine import FORMER_DEFAULTS, cpu_name, publish, tuning_text  # noqa: E402
 from step_overlaps import parse_variant, run  # noqa: E402  (tools/step_overlaps.py)
 from warm_start_energy import drop, settled_block  # noqa: E402
 
 #: --variants default: the former defaults, and over-relaxed sweeps with substeps at
 #: several caps (the defaults are 100 / 60)
 VARIANTS = [
-    "former defaults: plain, 100 / 100=relaxation=1.0 contact_iterations=100 "
-    "position_iterations=100 substeps=False step_scaled_sweeps=False",
+    "former defaults: plain, 100 / 100=" + tuning_text(FORMER_DEFAULTS),
     "ω 1.8, 100 / 100, substeps=relaxation=1.8 contact_iterations=100 "
     "position_iterations=100 substeps=True",
     "ω 1.8, 80 / 80, substeps=relaxation=1.8 contact_iterations=80 position_iterations=80 "

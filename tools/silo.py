@@ -41,7 +41,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
-from machine import cpu_name, write_section  # noqa: E402  (tools/machine.py)
+from machine import cpu_name, tuning_args, write_section  # noqa: E402  (tools/machine.py)
 
 G = 9.81
 DOCS = os.path.join(os.path.dirname(__file__), "..", "docs")
@@ -81,7 +81,7 @@ def engine_options(a) -> dict:
     """Simulation keywords of the command line: threads, step_fraction, the contact
     solver's velocity and position sweep caps and over-relaxation (None: the defaults),
     its shock propagation pass, substeps (Rules.substeps) and sweep caps scaled with the
-    step (Rules.step_scaled_sweeps)."""
+    step (Rules.step_scaled_sweeps), and --tuning's other options."""
     tuning = Tuning()
     if a.relaxation is not None:
         tuning = tuning.with_(relaxation=a.relaxation)
@@ -95,6 +95,7 @@ def engine_options(a) -> dict:
         tuning = tuning.with_(substeps=a.substeps)
     if a.scaled_sweeps is not None:
         tuning = tuning.with_(step_scaled_sweeps=a.scaled_sweeps)
+    tuning = tuning.with_(**getattr(a, "tuning", None) or {})
     return dict(threads=a.threads, step_fraction=a.step_fraction, tuning=tuning)
 
 
@@ -198,12 +199,17 @@ def parse(argv=None):
                    help="scale each step's sweep caps with its length "
                         "(Rules.step_scaled_sweeps; default: Rules', on); "
                         "--no-scaled-sweeps: the full caps in every step")
+    p.add_argument("--tuning", nargs="+", default=None, metavar="NAME=VALUE",
+                   help="other engine options (config.Tuning fields), e.g. "
+                        "discharge_in_place=False")
     p.add_argument("--write", action="store_true", help="write docs/granular.md's section")
     p.add_argument("--no-write", dest="write", action="store_false")
     p.add_argument("--json", help="also write the results to this JSON file")
     p.add_argument("--section", default="silo", help="the section of docs/granular.md "
                    "--write replaces ('silo-fill': the fill-height run)")
-    return p.parse_args(argv)
+    a = p.parse_args(argv)
+    a.tuning = tuning_args(a.tuning, p)
+    return a
 
 
 def run(a) -> dict:

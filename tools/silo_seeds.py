@@ -36,12 +36,11 @@ sys.path.insert(0, HERE)
 
 import peer_lammps_silo  # noqa: E402  (tools/peer_lammps_silo.py)
 import silo  # noqa: E402  (tools/silo.py)
-from machine import cpu_name, write_section  # noqa: E402
+from machine import FORMER_DEFAULTS, cpu_name, tuning_text, write_section  # noqa: E402
 
 #: --variants default: NAME=OPTIONS (tools/silo.py options)
-#: the defaults, and the former ones (plain sweeps at 100 / 100, no substeps)
-VARIANTS = ["defaults=", "former defaults=--relaxation 1.0 --position-sweeps 100 --no-substeps "
-            "--no-scaled-sweeps"]
+#: the defaults, and the former ones (tools/machine.py FORMER_DEFAULTS)
+VARIANTS = ["defaults=", "former defaults=--tuning " + tuning_text(FORMER_DEFAULTS)]
 #: the row name of LAMMPS's rates (--lammps)
 LAMMPS = "LAMMPS"
 

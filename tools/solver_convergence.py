@@ -74,14 +74,13 @@ sys.path.insert(0, HERE)
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from taichi_spheres.contacts.pgs import VELOCITY  # noqa: E402
-from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
+from machine import FORMER_DEFAULTS, cpu_name, publish  # noqa: E402  (tools/machine.py)
 
 
 #: the settings capture() runs with by default: plain sweeps without substeps, as the
 #: numpy sweeps here (pgs) and the figures of docs/bench.md (the contact solver's
 #: former defaults)
-FORMER = dict(relaxation=1.0, substeps=False, position_iterations=100,
-              step_scaled_sweeps=False)
+FORMER = FORMER_DEFAULTS
 
 
 def capture(scene_path: str, at: float, changes=None) -> dict:

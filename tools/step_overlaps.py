@@ -35,7 +35,7 @@ sys.path.insert(0, HERE)
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from contact_solver import max_overlap  # noqa: E402  (tools/contact_solver.py)
-from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
+from machine import FORMER_DEFAULTS, cpu_name, publish, tuning_text  # noqa: E402
 
 
 def run(scene, start: float, duration: float, every: int, changes: dict) -> dict:
@@ -102,9 +102,7 @@ def report(args, rows) -> str:
 
 #: --variants default: NAME=CHANGES (blank-separated Tuning field=value pairs)
 #: the defaults, and the former ones (plain sweeps at 100 / 100, no substeps, full caps)
-VARIANTS = ["defaults=",
-            "former defaults=relaxation=1.0 position_iterations=100 substeps=False "
-            "step_scaled_sweeps=False"]
+VARIANTS = ["defaults=", "former defaults=" + tuning_text(FORMER_DEFAULTS)]
 
 
 def parse_variant(text: str) -> tuple:

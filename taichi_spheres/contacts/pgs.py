@@ -193,13 +193,13 @@ class GaussSeidel:
         [Rules.min_scaled_sweeps, full], and the plain sweeps in proportion (at least
         one where plain_sweeps > 0). A sequence of short steps then runs about the
         sweeps per simulated second of quiet ones, each warm-started from the last; a
-        cold solve (the first of a Simulation: h_prev 0; or Rules.warm_start off) has
+        cold solve (the first of a Simulation, no has_last_step; or Rules.warm_start off) has
         no last step to start from and keeps the full caps."""
         cap[None] = full
         plain[None] = self.rules.plain_sweeps
         if ti.static(self.rules.step_scaled_sweeps and self.rules.warm_start):
             share = ti.cast(1, self.real)      # quiet_len 0 (unknown), or cold: full caps
-            if self.quiet_len[None] > 0 and self.h_prev[None] > 0:
+            if self.quiet_len[None] > 0 and self.has_last_step():
                 share = ti.min(self.params.h[None] * self.impact_speed() /
                                self.quiet_len[None], 1)
             low = min(self.rules.min_scaled_sweeps, full)

@@ -217,11 +217,17 @@ class ContactRows:
         return n, gap, meff
 
     @ti.func
+    def has_last_step(self):
+        """True when a solved step came before this one (h_prev > 0: the warm-start
+        table holds its impulses); a new Simulation's first solve is cold."""
+        return self.h_prev[None] > 0
+
+    @ti.func
     def warm_slot(self, a, b):
         """The slot of row (a, b) in sphere a's warm-start table, or -1 if it is new."""
         out = -1
         kept = self.warm_n[a]
-        if kept <= ti.static(self.perf.warm_slots) and self.h_prev[None] > 0:
+        if kept <= ti.static(self.perf.warm_slots) and self.has_last_step():
             for t in range(kept):
                 if self.warm_key[a, t] == b:
                     out = t

@@ -65,6 +65,7 @@ from .shock import ShockPropagation, shock_compiled
 from .sweeps import MAX_COLOURS
 from .position_energy import PositionEnergy
 from .warm_energy import WarmStartEnergy
+from .warm_table import WarmTable
 
 __all__ = ["ContactSolver"]
 
@@ -72,7 +73,7 @@ __all__ = ["ContactSolver"]
 
 @ti.data_oriented
 class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
-                    WarmStartEnergy, PositionEnergy, OverlapMeasure):
+                    WarmStartEnergy, PositionEnergy, OverlapMeasure, WarmTable):
     """Contact rows and their projected Gauss–Seidel solve (module docstring).
 
     Fields (K = contacts_per_sphere x capacity rows, M = cells, N = spheres):
@@ -218,6 +219,15 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
     def bind(self, scene, geom, reach=None):
         """Load a scene's grid geometry ``geom`` (colours; the speculative margin: the
         grid's slack, or ``reach`` [m] if smaller) and forget the warm start."""
+        self.bind_scalars(scene, geom, reach)
+        self.h_prev[None] = 0
+        self.warm_n.fill(0)
+        self.state.loaded.fill(0)
+        self.state.near.fill(0)
+
+    def bind_scalars(self, scene, geom, reach=None):
+        """bind's values that follow from the scene and ``geom``: colours, tolerances,
+        margins and the sphere count (the warm start stays)."""
         self.n_colours = len(geom.colours)
         self.n_colours_f[None] = self.n_colours
         # a tenth of the overlap tolerance of the smallest contact distance [m]
@@ -227,10 +237,6 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         # (contact_margin - 1) D; without reach it is unknown (0: pgs.set_cap's full caps)
         margin = self.rules.contact_margin
         self.quiet_len[None] = 0.0 if reach is None else max(margin - 1.0, 0.0) * reach / margin
-        self.h_prev[None] = 0
-        self.warm_n.fill(0)
-        self.state.loaded.fill(0)
-        self.state.near.fill(0)
         self.n = scene.n
 
     @ti.func
@@ -539,40 +545,3 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
                     break
                 relaxed = False
         return it
-
-    def warm_rows(self, n: int) -> dict:
-        """The warm-start table of the first n spheres (numpy copies) and h_prev [s]."""
-        out = dict(key=self.warm_key.to_numpy()[:n], lam=self.warm_lam.to_numpy()[:n],
-                   kept=self.warm_n.to_numpy()[:n], loaded=self.state.loaded.to_numpy()[:n],
-                   h_prev=float(self.h_prev[None]))
-        if self.rules.substeps:
-            out["near"] = self.state.near.to_numpy()[:n]
-        for name in ("warm_t", "warm_r"):
-            if getattr(self, name) is not None:
-                out[name] = getattr(self, name).to_numpy()[:n]
-        return out
-
-    def load_warm(self, warm: dict) -> None:
-        """Load a table written by :meth:`warm_rows` (same precision and slots)."""
-        n = len(warm["kept"])
-        key = self.warm_key.to_numpy()
-        lam = self.warm_lam.to_numpy()
-        kept = self.warm_n.to_numpy()
-        loaded = self.state.loaded.to_numpy()
-        key[:n], lam[:n], kept[:n] = warm["key"], warm["lam"], warm["kept"]
-        loaded[:n] = warm["loaded"]
-        self.state.loaded.from_numpy(loaded)
-        if self.rules.substeps:      # (a table without: every sphere counts as near)
-            near = self.state.near.to_numpy()
-            near[:n] = warm["near"] if "near" in warm else 1
-            self.state.near.from_numpy(near)
-        self.warm_key.from_numpy(key)
-        self.warm_lam.from_numpy(lam)
-        self.warm_n.from_numpy(kept)
-        self.h_prev[None] = warm["h_prev"]
-        for name in ("warm_t", "warm_r"):
-            field = getattr(self, name)
-            if field is not None and name in warm:
-                table = field.to_numpy()
-                table[:n] = warm[name]
-                field.from_numpy(table)

@@ -1,0 +1,171 @@
+"""Sinks taking spheres out in place (Performance.discharge_in_place, Engine.keep_spheres,
+contacts/warm_table.py): the remaining spheres' warm-start table moves down in the
+engine's fields, with the same bits as reading every table to the host, renumbering it
+(discharge.renumber_warm) and loading the scene again.
+"""
+import dataclasses
+
+import numpy as np
+import pytest
+
+import taichi_spheres as ts
+from taichi_spheres.config import Tuning
+from taichi_spheres.discharge import DROPPED_PARTNER, renumber_warm
+
+GLASS = ts.Material("glass", restitution=0.5, friction=0.3)
+RUBBER = ts.Material("rubber", restitution=0.4, friction=0.6, rolling_friction=0.02)
+
+
+def _silo(recycle=False, materials=False, rolling=0.0, substeps=True):
+    """~60 spheres (radii 4.5-5 mm) in a cylinder on a plane with an orifice of 20 mm,
+    a sink below; friction 0.5 (or two materials), optional rolling friction."""
+    rng = np.random.default_rng(3)
+    g = (np.arange(5) - 2) * 0.013
+    x = np.array([(0.06 + a, 0.06 + b, 0.06 + 0.012 * k) for a in g for b in g
+                  for k in range(4)], float)
+    x = x[np.hypot(x[:, 0] - 0.06, x[:, 1] - 0.06) < 0.04]
+    radius = rng.uniform(0.0045, 0.005, len(x))
+    extra = (dict(materials=[GLASS, RUBBER], material=np.arange(len(x)) % 2) if materials
+             else dict(friction=0.5, rolling_friction=rolling))
+    scene = ts.Scene.from_arrays(
+        x, np.zeros_like(x), radius, box=((0, 0, 0), (0.12, 0.12, 0.2)), restitution=0.5,
+        wall_restitution=0.5,
+        geometry=[ts.Plane((0.06, 0.06, 0.05), (0, 0, 1), hole=0.02),
+                  ts.Cylinder((0.06, 0.06, 0.05), (0, 0, 1), 0.05, length=0.15)],
+        sinks=[ts.Sink((0, 0, 0), (0.12, 0.12, 0.03), recycle=recycle)], **extra)
+    return scene, Tuning().with_(substeps=substeps)
+
+
+def _warm_in_use(warm: dict) -> dict:
+    """The warm-start table's bytes in the slots in use (the others hold whatever the
+    engine's fields held before)."""
+    slots = warm["key"].shape[1]
+    used = np.arange(slots)[None, :] < np.minimum(warm["kept"], slots)[:, None]
+    return {k: (w[used] if k in ("key", "lam", "warm_t", "warm_r") else np.asarray(w)).tobytes()
+            for k, w in warm.items()}
+
+
+def _run(scene, tuning, arch, precision, in_place, times):
+    """(x, v, omega bytes, warm table, stats, sphere ids) after each of ``times`` [s]."""
+    sim = ts.Simulation(scene, arch=arch, precision=precision,
+                        tuning=tuning.with_(discharge_in_place=in_place))
+    out = []
+    for t in times:
+        sim.advance_to(t)
+        st = sim.state()
+        out.append((st.x.tobytes(), st.v.tobytes(), st.omega.tobytes(),
+                     _warm_in_use(sim.debug_view().solver.warm_rows(sim.n)),
+                     {k: sim.stats[k] for k in ("steps", "discharged", "contact_iterations",
+                                                "energy_discharged", "contacts")},
+                     sim.sphere_ids.tolist()))
+    return out, sim.stats["discharged"]
+
+
+def _same_bits_both_ways(arch, precision, case):
+    scene, tuning = _silo(**case)
+    times = (0.25, 0.4)
+    in_place, gone = _run(scene, tuning, arch, precision, True, times)
+    reload, _ = _run(scene, tuning, arch, precision, False, times)
+    assert gone > 0
+    assert in_place == reload
+
+
+@pytest.mark.parametrize("case", [
+    dict(rolling=0.02), dict(materials=True), dict(recycle=True), dict(substeps=False)])
+def test_discharge_in_place_keeps_the_bits_of_a_reload(arch, case):
+    """A discharging silo (polydisperse, frictional; with rolling friction, two
+    materials, a recycling sink, or without substeps) gives the same positions,
+    velocities, spins, warm-start tables and counters whether the discharge moves the
+    warm start in place or through the host (f64)."""
+    if arch == "metal":
+        pytest.skip("no f64 on this arch")
+    _same_bits_both_ways(arch, "f64", case)
+
+
+def test_discharge_in_place_keeps_the_bits_of_a_reload_in_f32(arch):
+    """The same in f32, where the host's copies pass through float64."""
+    _same_bits_both_ways(arch, "f32", {})
+
+
+def test_host_only_options_share_the_compiled_engine(arch):
+    """discharge_in_place is read by the host only: it is left out of the engines' key,
+    and Simulations that differ only in it run on one engine."""
+    a = Tuning().with_(discharge_in_place=False)
+    assert a.compiled() == Tuning().compiled() == Tuning()
+    assert a.performance.discharge_in_place is False
+    scene, tuning = _silo()
+    one = ts.Simulation(scene, arch=arch, precision="f64", tuning=tuning)
+    other = ts.Simulation(scene, arch=arch, precision="f64",
+                          tuning=tuning.with_(discharge_in_place=False))
+    assert one.debug_view().engine is other.debug_view().engine
+
+
+def _random_warm_table(solver, n: int, rng) -> dict:
+    """A warm-start table of n spheres with random impulses and flags, partners among
+    them, walls (< 0) and DROPPED_PARTNER, and counts up to warm_slots + 2 (more than
+    the slots: every slot in use)."""
+    table = solver.warm_rows(n)
+    slots = table["key"].shape[1]
+    out = dict(h_prev=1e-3)
+    out["key"] = rng.integers(-9, n, size=(n, slots)).astype(table["key"].dtype)
+    out["key"][0, 0] = DROPPED_PARTNER
+    out["kept"] = rng.integers(0, slots + 3, size=n).astype(table["kept"].dtype)
+    for name in ("loaded", "near"):
+        out[name] = rng.integers(0, 2, size=n).astype(table[name].dtype)
+    for name in ("lam", "warm_t", "warm_r"):
+        out[name] = rng.random(table[name].shape).astype(table[name].dtype)
+    return out
+
+
+def test_warm_table_moves_down_as_the_host_renumbers_it(arch):
+    """ContactSolver.keep_spheres on a random table (rolling friction: every impulse
+    table) leaves, in the slots in use, what discharge.renumber_warm makes of it."""
+    if arch == "metal":
+        pytest.skip("no f64 on this arch")
+    scene, tuning = _silo(rolling=0.02)
+    sim = ts.Simulation(scene, arch=arch, precision="f64", tuning=tuning)
+    solver = sim.debug_view().solver
+    rng = np.random.default_rng(7)
+    table = _random_warm_table(solver, sim.n, rng)
+    solver.load_warm(table)
+    keep = rng.random(sim.n) < 0.6
+    keep[0] = True
+    smaller = dataclasses.replace(scene, x=scene.x[keep], v=scene.v[keep],
+                                  radius=scene.radius[keep], mass=scene.mass[keep],
+                                  omega=scene.omega[keep], material=scene.material[keep])
+    solver.keep_spheres(smaller, sim.geometry, None, keep)
+    got = solver.warm_rows(int(keep.sum()))
+    expected = renumber_warm(table, keep)
+    assert DROPPED_PARTNER in expected["key"]
+    expected = {k: np.asarray(w, dtype=np.asarray(got[k]).dtype) for k, w in expected.items()}
+    assert _warm_in_use(got) == _warm_in_use(expected)
+
+
+def test_discharge_in_place_beside_another_simulation(arch):
+    """A Simulation that discharged in place, parked while another one of the same
+    scene ran on its engine, goes on with the bits of one that ran alone."""
+    if arch == "metal":
+        pytest.skip("no f64 on this arch")
+    scene, tuning = _silo()
+    alone, _ = _run(scene, tuning, arch, "f64", True, (0.25, 0.4))
+    sim = ts.Simulation(scene, arch=arch, precision="f64", tuning=tuning)
+    sim.advance_to(0.25)
+    assert sim.stats["discharged"] > 0
+    other = ts.Simulation(scene, arch=arch, precision="f64", tuning=tuning)
+    other.advance(0.05)
+    assert other.debug_view().engine is sim.debug_view().engine
+    sim.advance_to(0.4)
+    st = sim.state()
+    assert (st.x.tobytes(), st.v.tobytes(), st.omega.tobytes()) == alone[1][:3]
+
+
+def test_renumbered_warm_table_drops_the_partners_that_left():
+    """The host's renumbering (which the in-place move reproduces): rows in use keep
+    their partner's new index, or DROPPED_PARTNER where it left; walls (< 0) and the
+    unused slots stay."""
+    key = np.array([[1, 2, -3, 7], [2, -1, 0, 0], [0, 0, 0, 0]], dtype=np.int32)
+    warm = dict(key=key, lam=np.ones((3, 4)), kept=np.array([3, 2, 0]),
+                loaded=np.array([1, 1, 0]), h_prev=1e-3)
+    out = renumber_warm(warm, np.array([True, False, True]))
+    assert out["key"].tolist() == [[DROPPED_PARTNER, 1, -3, 7], [0, 0, 0, 0]]
+    assert out["kept"].tolist() == [3, 0]
