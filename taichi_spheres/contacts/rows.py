@@ -12,23 +12,35 @@ from .friction import clamped, rolling_bounded, tangential_part
 from .friction_rows import GEOMETRY_ROWS
 
 
+#: what ContactRows.record does with a row: count it for its owner cell; place it in
+#: the cell's range (after the scan); or count it and keep it in the staging list
+#: (serial gathering: the rows are then placed from the list, not found again)
+COUNT, PLACE, STAGE = 0, 1, 2
+
+
 class ContactRows:
     """Gathering rows per owner cell (count, scan, place, sort), their geometry and
     the warm start."""
 
     @ti.func
-    def record(self, owner, a, b, fill: ti.template()):
-        """Count row (a, b) for its owner cell, or (fill) write it in the cell's range."""
-        if ti.static(not fill):
-            ti.atomic_add(self.cell_count[owner], 1)
-        else:
+    def record(self, owner, a, b, how: ti.template()):
+        """Row (a, b) of cell ``owner``: counted (COUNT), written in the cell's range
+        (PLACE), or counted and staged (STAGE: ``staged``, in the order found)."""
+        if ti.static(how == PLACE):
             slot = self.cell_start[owner] + ti.atomic_add(self.cell_fill[owner], 1)
             if slot < ti.static(self.capacity):
                 self.row_a[slot] = a
                 self.row_b[slot] = b
+        else:
+            ti.atomic_add(self.cell_count[owner], 1)
+            if ti.static(how == STAGE):
+                t = self.n_staged[None]
+                self.n_staged[None] = t + 1
+                if t < ti.static(self.capacity):
+                    self.staged[t] = ti.Vector([owner, a, b])
 
     @ti.func
-    def consider_pair(self, i, xi, vi, ri, q, ci, fill: ti.template()):
+    def consider_pair(self, i, xi, vi, ri, q, ci, how: ti.template()):
         """Row for pair (i, j = grid.order[q]) if closer than the margin and not an
         impact to come (approaching at or above the pair's impact speed while still
         apart: walls.Motion.pair_impact_speed)."""
@@ -46,13 +58,13 @@ class ContactRows:
                     un >= -self.pairs.motion.pair_impact_speed(i, j):
                 cj = self.grid.coords(self.grid.cell_of[j])
                 owner = self.grid.linear(self.grid.owner(ci, cj))
-                self.record(owner, ti.min(i, j), ti.max(i, j), fill)
+                self.record(owner, ti.min(i, j), ti.max(i, j), how)
             else:               # its overlaps after the solve: overlaps.py
                 self.unrowed[i] = 1
                 self.unrowed[j] = 1
 
     @ti.func
-    def consider_walls(self, i, xi, vi, ri, k, fill: ti.template()):
+    def consider_walls(self, i, xi, vi, ri, k, how: ti.template()):
         """Rows for sphere i (cell k) and the walls closer than the margin, unless it
         moves into one at or above that wall's impact speed (walls.Motion
         .wall_impact_speed: 0 for side walls and ceilings under gravity)."""
@@ -69,17 +81,17 @@ class ContactRows:
                 sub = ti.static(self.rules.substeps)
                 if lo_gap < self.margin[None]:
                     if sub or lo_gap < 0 or -vi[a] <= lo_imp:
-                        self.record(k, i, -1 - 2 * a, fill)
+                        self.record(k, i, -1 - 2 * a, how)
                     else:       # its overlap after the solve: overlaps.py
                         self.unrowed[i] = 1
                 if hi_gap < self.margin[None]:
                     if sub or hi_gap < 0 or vi[a] <= hi_imp:
-                        self.record(k, i, -2 - 2 * a, fill)
+                        self.record(k, i, -2 - 2 * a, how)
                     else:
                         self.unrowed[i] = 1
 
     @ti.func
-    def consider_geometry(self, i, xi, vi, ri, k, fill: ti.template()):
+    def consider_geometry(self, i, xi, vi, ri, k, how: ti.template()):
         """Rows for sphere i (cell k) and the geometry objects closer than the margin,
         unless it moves into one at or above the impact speed (surfaces.py)."""
         motion = self.pairs.motion
@@ -91,12 +103,12 @@ class ContactRows:
                     acc = self.params.gravity[None].dot(n)
                 if ti.static(self.rules.substeps) or gap < 0 or \
                         -vi.dot(n) <= motion.wall_impact_speed(i, acc):
-                    self.record(k, i, -1 - GEOMETRY_ROWS - g, fill)
+                    self.record(k, i, -1 - GEOMETRY_ROWS - g, how)
                 else:           # its overlap after the solve: overlaps.py
                     self.unrowed[i] = 1
 
     @ti.func
-    def gather_sphere(self, p, fill: ti.template()):
+    def gather_sphere(self, p, how: ti.template()):
         """Rows of the sphere at grid slot p: forward neighbours (grid.FORWARD_ROWS, each
         pair once) and walls."""
         i = self.grid.order[p]
@@ -110,13 +122,13 @@ class ContactRows:
             if row == 0:
                 a0 = p + 1
             for q in range(a0, b0):
-                self.consider_pair(i, xi, vi, ri, q, ci, fill)
+                self.consider_pair(i, xi, vi, ri, q, ci, how)
             for q in range(a1, b1):
-                self.consider_pair(i, xi, vi, ri, q, ci, fill)
+                self.consider_pair(i, xi, vi, ri, q, ci, how)
         if ti.static(self.f.walls):
-            self.consider_walls(i, xi, vi, ri, k, fill)
+            self.consider_walls(i, xi, vi, ri, k, how)
         if ti.static(self.f.geometry):
-            self.consider_geometry(i, xi, vi, ri, k, fill)
+            self.consider_geometry(i, xi, vi, ri, k, how)
 
     @ti.func
     def row_before(self, s, t):
@@ -166,18 +178,30 @@ class ContactRows:
 
     @ti.func
     def gather(self):
-        """Count, place and sort the rows of the bound grid (kernel top level)."""
+        """Count, place and sort the rows of the bound grid (kernel top level). In
+        parallel the spheres' neighbours are searched twice, to count the rows per owner
+        cell and to place them after the scan; serially once, the rows staged in the
+        order found and placed from that list (the same order as a second search)."""
         ti.loop_config(serialize=ti.static(self.serial))
         for k in range(self.grid.n_cells[None]):
             self.cell_count[k] = 0
             self.cell_fill[k] = 0
-        ti.loop_config(serialize=ti.static(self.serial))
-        for p in range(self.state.n_spheres[None]):
-            self.gather_sphere(p, False)
-        self.scan_cells()
-        ti.loop_config(serialize=ti.static(self.serial))
-        for p in range(self.state.n_spheres[None]):
-            self.gather_sphere(p, True)
+        if ti.static(self.serial):
+            self.n_staged[None] = 0
+            ti.loop_config(serialize=True)
+            for p in range(self.state.n_spheres[None]):
+                self.gather_sphere(p, STAGE)
+            self.scan_cells()
+            ti.loop_config(serialize=True)
+            for t in range(ti.min(self.n_staged[None], ti.static(self.capacity))):
+                row = self.staged[t]
+                self.record(row[0], row[1], row[2], PLACE)
+        else:
+            for p in range(self.state.n_spheres[None]):
+                self.gather_sphere(p, COUNT)
+            self.scan_cells()
+            for p in range(self.state.n_spheres[None]):
+                self.gather_sphere(p, PLACE)
         ti.loop_config(serialize=ti.static(self.serial))
         for k in range(self.grid.n_cells[None]):
             self.sort_cell(k)

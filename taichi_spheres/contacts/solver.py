@@ -108,6 +108,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             own rows, colour by colour (pgs.list_active_cells); colour_fill:
             (MAX_COLOURS,) i32 its counts
         scan_bufs: cell_start and the block sums of its scan (grid.scan_buffers)
+        staged: (K,) vec3 i32, only on serial engines — the rows in the order the
+            gathering found them: owner cell, a, b (rows.py gather); n_staged their count
     """
 
     def __init__(self, state: SphereState, grid: Grid, params: StepParams, pairs,
@@ -183,6 +185,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.colour_active = ti.field(ti.i32, shape=MAX_COLOURS + 1)
         self.colour_fill = ti.field(ti.i32, shape=MAX_COLOURS)
         self.scan_bufs = self.grid.scan_buffers(self.cell_start)
+        # serial gathering stages each row as found (rows.py gather): (owner, a, b)
+        self.staged = ti.Vector.field(3, ti.i32, shape=k) if self.serial else None
+        self.n_staged = ti.field(ti.i32, shape=()) if self.serial else None
         self.n_colours = 0
         self.margin = ti.field(real, shape=())       # speculative margin [m]
         self.h_prev = ti.field(real, shape=())       # length of the last solved step [s]
