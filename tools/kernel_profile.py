@@ -14,8 +14,9 @@ The window (``--window`` s) runs twice from a checkpoint, the first time untimed
 that no kernel compiles in the second). Reported: steps, wall ms per step (profiler
 on), contact rows and sweeps per step, and each kernel's share of the kernel time with
 its mean ms per launch. Taichi names a kernel's tasks ``<kernel>_c<n>_<k>_kernel_<task>``:
-``solve_serial`` is the contact solver of the serial engines (its task 4 holds the
-velocity sweeps, task 6 the position sweeps, task 0 gathers the rows), ``sweep`` one
+``solve_serial`` is the contact solver of the serial engines (Taichi merges its
+consecutive serial loops: task 0 searches for the rows, task 2 places them and holds
+the warm start, the velocity and position sweeps and the rest), ``sweep`` one
 parallel sweep, ``detect_*`` and ``build`` the grid and detection, ``drift`` the
 flight.
 
