@@ -488,16 +488,15 @@ class Simulation:
         if gone.kept is not None:
             self.sphere_ids = self.sphere_ids[gone.kept]
         self.scene = scene
-        if scene.n == 0:           # every sphere has left: time still runs, nothing moves
-            self._engine.release(self)
+        if not in_place or scene.n == 0:
             self._parked = rows + (warm,)
+            self._engine.release(self)
+        if scene.n == 0:           # every sphere has left: time still runs, nothing moves
             self._vmax2 = self._vmax2_near = 0.0
             return
         if in_place:
             self._engine.keep_spheres(self, *rows, gone.kept, self._reach())
         else:
-            self._parked = rows + (warm,)
-            self._engine.release(self)
             self._bind()
         near = self._vmax2_near
         self._measure_vmax()

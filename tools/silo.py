@@ -95,7 +95,7 @@ def engine_options(a) -> dict:
         tuning = tuning.with_(substeps=a.substeps)
     if a.scaled_sweeps is not None:
         tuning = tuning.with_(step_scaled_sweeps=a.scaled_sweeps)
-    tuning = tuning.with_(**getattr(a, "tuning", None) or {})
+    tuning = tuning.with_(**a.tuning)
     return dict(threads=a.threads, step_fraction=a.step_fraction, tuning=tuning)
 
 
