@@ -22,6 +22,7 @@ more steps.
     python tools/ab_revisions.py HEAD~1 HEAD --pour-bed --rounds 5
     python tools/ab_revisions.py HEAD~1 HEAD --pour-bed --pour-seeds 8 --rounds 1
     python tools/ab_revisions.py HEAD~1 HEAD --silo --rounds 2
+    python tools/ab_revisions.py HEAD~1 HEAD --silo --interleaved --repeats 10
 
 With ``--silo`` the measure is the frictional silo of tools/kernel_profile.py --silo
 (tools/peer_lammps_silo.py's 1,722 spheres, mu = 0.5, settled, 0.2 s into the
@@ -29,6 +30,13 @@ discharge): each revision's run times the same ``--window`` s (default 0.1) of t
 discharge ``--repeats`` times from one checkpoint (after an untimed pass), 1 thread,
 and reports the fastest wall ms per step. Two revisions that keep the same bits run the
 same steps, so the ratio of ms per step is the ratio of their costs.
+
+With ``--silo --interleaved`` both revisions run in one process on one Taichi runtime
+(revision B's package imported under another name, its tools/silo.py bound to it),
+from the same settled fill, and their windows alternate A, B, A, B, ...: a shared
+machine whose speed drifts from minute to minute slows both alike, where separate
+processes a minute apart can differ by 30 %. Reported: per revision the fastest and
+the median window, and the median of the per-pair ratios B / A.
 """
 from __future__ import annotations
 
@@ -130,6 +138,106 @@ print("windows", *times)
 """
 
 
+#: --silo --interleaved: run in this checkout with the two worktrees as argv[1:3];
+#: then window [s], repeats
+INTERLEAVED = """
+import importlib.util, statistics, sys, time
+sys.path.insert(0, "tools")
+tree_a, tree_b, window, repeats = sys.argv[1], sys.argv[2], float(sys.argv[3]), int(sys.argv[4])
+
+def load(path, name):
+    spec = importlib.util.spec_from_file_location(
+        name, path + "/__init__.py", submodule_search_locations=[path])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+def package(tree, name):
+    # the package of a worktree as ``name``; the tools' silo.py bound to it
+    ts = load(tree + "/taichi_spheres", name)
+    saved = {k: v for k, v in sys.modules.items() if k == "taichi_spheres" or
+             k.startswith("taichi_spheres.")}
+    for k in list(saved):
+        del sys.modules[k]
+    sys.modules["taichi_spheres"] = ts
+    sys.modules["taichi_spheres.config"] = ts.config
+    silo = load_file("tools/silo.py", "silo_" + name)
+    for k in ("taichi_spheres", "taichi_spheres.config"):
+        del sys.modules[k]
+    sys.modules.update(saved)
+    return ts, silo
+
+def load_file(path, name):
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+ts_a, silo_a = package(tree_a, "revision_a")
+ts_b, silo_b = package(tree_b, "revision_b")
+import peer_lammps_silo
+from machine import untimed_pass
+a = peer_lammps_silo.settings([])
+rt = ts_a.runtime.ensure("cpu", "f64", threads=1)
+ts_b.runtime._current, ts_b.runtime._generation = rt, ts_a.runtime._generation
+settled = silo_a.settled_fill(a, a.fill, seed=1)
+sims = [silo.discharging(a, settled, a.orifice * a.radius) for silo in (silo_a, silo_b)]
+starts = []
+for sim in sims:
+    sim.advance(0.2)
+    untimed_pass(sim, lambda s: s.advance(window))
+    starts.append(sim.checkpoint())
+times = [[], []]
+for _ in range(repeats):
+    for k, sim in enumerate(sims):
+        sim.restore(starts[k])
+        s0, t0 = sim.stats["steps"], time.perf_counter()
+        sim.advance(window)
+        times[k].append((time.perf_counter() - t0) / (sim.stats["steps"] - s0))
+steps = [sim.stats["steps"] - s0 for sim in sims]
+print("steps", *steps)
+for k in range(2):
+    print("windows", *times[k])
+"""
+
+
+def silo_interleaved(trees: tuple, window: float, repeats: int) -> tuple:
+    """([A's wall s per step per window], [B's], (A's steps, B's)) of ``window`` s of
+    the silo's discharge, both revisions' windows alternating in one process."""
+    out = subprocess.run([sys.executable, "-c", INTERLEAVED, *trees, str(window),
+                          str(repeats)], capture_output=True, text=True, cwd=ROOT)
+    if out.returncode != 0:
+        raise RuntimeError(f"the interleaved run failed:\n{out.stderr[-3000:]}")
+    steps = re.search(r"^steps ([0-9]+) ([0-9]+)$", out.stdout, re.M)
+    windows = re.findall(r"^windows (.*)$", out.stdout, re.M)
+    if not steps or len(windows) != 2:
+        raise RuntimeError(f"no steps and windows in the run's output:\n{out.stdout[-2000:]}")
+    a, b = ([float(w) for w in line.split()] for line in windows)
+    return a, b, (int(steps.group(1)), int(steps.group(2)))
+
+
+def silo_interleaved_main(args) -> int:
+    """--silo --interleaved: both revisions in one process, windows alternating."""
+    a_rev, b_rev = args.rev_a, args.rev_b
+    with worktrees(a_rev, b_rev) as trees:
+        a, b, steps = silo_interleaved((trees[a_rev], trees[b_rev]), args.window,
+                                       args.repeats)
+    for rev, times in ((a_rev, a), (b_rev, b)):
+        print(f"{rev}: fastest {1e3 * min(times):.2f}, median "
+              f"{1e3 * statistics.median(times):.2f} ms per step ("
+              + " ".join(f"{1e3 * t:.2f}" for t in times) + ")")
+    if steps[0] != steps[1]:
+        print(f"warning: the revisions ran different steps ({steps}): they do not keep "
+              "the same bits, so the ratio mixes cost per step with trajectory")
+    ratios = [y / x for x, y in zip(a, b)]
+    print(f"{b_rev} / {a_rev}: wall per step, pairs of windows: median "
+          f"{statistics.median(ratios):.3f} (range {min(ratios):.3f}-{max(ratios):.3f}); "
+          f"fastest {min(b) / min(a):.3f} ({steps[0]} steps per window; < 1: {b_rev} "
+          "is faster)")
+    return 0
+
+
 def silo_cost(tree: str, window: float, repeats: int) -> tuple:
     """(fastest wall s per step, steps) of ``window`` s of the silo's discharge with the
     package of the revision checked out in ``tree``."""
@@ -214,19 +322,22 @@ def main(argv=None):
                    help="with --silo: seconds timed (default 0.1)")
     p.add_argument("--repeats", type=int, default=None,
                    help="with --silo: timed windows (default 5)")
+    p.add_argument("--interleaved", action="store_true",
+                   help="with --silo: both revisions in one process, windows alternating")
     args = p.parse_args(argv)
     if args.pour_seeds < 0 or (args.pour_seeds and not args.pour_bed):
         p.error("--pour-seeds takes a count >= 0 and needs --pour-bed")
     if args.silo and args.pour_bed:
         p.error("give --silo or --pour-bed, not both")
-    if not args.silo and (args.window is not None or args.repeats is not None):
-        p.error("--window and --repeats need --silo")
+    if not args.silo and (args.window is not None or args.repeats is not None
+                          or args.interleaved):
+        p.error("--window, --repeats and --interleaved need --silo")
     if args.silo:
         args.window = 0.1 if args.window is None else args.window
         args.repeats = 5 if args.repeats is None else args.repeats
         if not (math.isfinite(args.window) and args.window > 0) or args.repeats < 1:
             p.error("--window takes seconds > 0 and --repeats a count >= 1")
-        return silo_main(args)
+        return silo_interleaved_main(args) if args.interleaved else silo_main(args)
     unit = "simulated s per wall s (pour bed, 1 thread)" if args.pour_bed else \
         "sphere-steps/s"
     with worktrees(args.rev_a, args.rev_b) as trees:

@@ -45,11 +45,12 @@ from taichi_spheres import runtime  # noqa: E402
 from machine import hardware, publish, untimed_pass  # noqa: E402
 
 
-def silo_simulation():
-    """The silo of tools/peer_lammps_silo.py, settled and 0.2 s into its discharge."""
+def silo_simulation(tuning=()):
+    """The silo of tools/peer_lammps_silo.py, settled and 0.2 s into its discharge
+    (``tuning``: tools/silo.py's --tuning NAME=VALUE items)."""
     import peer_lammps_silo  # noqa: E402  (tools/peer_lammps_silo.py)
     import silo  # noqa: E402  (tools/silo.py)
-    a = peer_lammps_silo.settings([])
+    a = peer_lammps_silo.settings(["--tuning", *tuning] if tuning else [])
     sim = silo.discharging(a, silo.settled_fill(a, a.fill, seed=1), a.orifice * a.radius)
     sim.advance(0.2)
     return sim
@@ -110,8 +111,12 @@ def main(argv=None):
     ap.add_argument("--precision", default="f64", choices=["f64", "f32"])
     ap.add_argument("--host", action="store_true",
                     help="also profile the Python side of the window (cProfile, top 15)")
+    ap.add_argument("--tuning", nargs="+", default=[], metavar="NAME=VALUE",
+                    help="with --silo: Tuning.with_ keywords of its run (tools/silo.py's)")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args(argv)
+    if args.tuning and not args.silo:
+        ap.error("--tuning goes with --silo")
     if [args.scene is not None, args.silo, args.gas != 0, args.silo_large != 0].count(True) != 1:
         ap.error("give one of --scene TOML, --gas N, --silo or --silo-large N")
     if args.gas < 0 or args.silo_large < 0:
@@ -134,7 +139,7 @@ def simulation(args, threads) -> tuple:
     """(Simulation at the window's start, its label in the report, the report's section)
     of the command line's run."""
     if args.silo:
-        return silo_simulation(), "Silo discharge (tools/peer_lammps_silo.py's)", "profile-silo"
+        return silo_simulation(args.tuning), "Silo discharge (tools/peer_lammps_silo.py's)", "profile-silo"
     if args.silo_large:
         import silo_large  # noqa: E402  (tools/silo_large.py)
         a = silo_large.parser().parse_args(["--count", str(args.silo_large),
