@@ -33,6 +33,12 @@ from .friction import (TANGENTIAL_MASS, clamped, contact_velocity, rolling_bound
 GEOMETRY_ROWS = 6
 
 
+@ti.func
+def idle(impulse):
+    """Every component of the vector impulse is zero (either sign)."""
+    return impulse[0] == 0 and impulse[1] == 0 and impulse[2] == 0
+
+
 class FrictionRows:
     """Tangential and rolling updates of one row, their coefficients and limits."""
 
@@ -99,42 +105,54 @@ class FrictionRows:
     @ti.func
     def friction_row(self, s):
         """One update of row s's tangential impulse; returns the change of the
-        tangential contact velocity it made [m/s]."""
-        a = self.row_a[s]
-        b = self.row_b[s]
-        n = self.normal[s]
-        vb = ti.Vector.zero(self.real, 3)
-        wb = ti.Vector.zero(self.real, 3)
-        rb = ti.cast(0, self.real)
-        if b >= 0:
-            vb = self.state.v[b]
-            wb = self.state.omega[b]
-            rb = self.state.rad(b)
-        ut = tangential_part(contact_velocity(self.state.v[a], vb, self.state.omega[a], wb,
-                                              self.state.rad(a), rb, n), n)
-        mt = ti.static(TANGENTIAL_MASS) * self.meff[s]
+        tangential contact velocity it made [m/s]. A row whose disc has shrunk to a
+        point (mu lambda_n = 0: a speculative row, or a contact the normal row has
+        opened) and that holds no tangential impulse is left as it is: the update
+        would clamp it to zero again and change nothing (idle)."""
         old = self.lam_t[s]
-        new = clamped(old - mt * ut, self.row_friction(s) * self.lam[s])
-        self.lam_t[s] = new
-        self.push_tangent(a, b, n, new - old)
-        return (new - old).norm() / mt
+        limit = self.row_friction(s) * self.lam[s]
+        out = ti.cast(0, self.real)
+        if limit > 0 or not idle(old):
+            a = self.row_a[s]
+            b = self.row_b[s]
+            n = self.normal[s]
+            vb = ti.Vector.zero(self.real, 3)
+            wb = ti.Vector.zero(self.real, 3)
+            rb = ti.cast(0, self.real)
+            if b >= 0:
+                vb = self.state.v[b]
+                wb = self.state.omega[b]
+                rb = self.state.rad(b)
+            ut = tangential_part(contact_velocity(self.state.v[a], vb, self.state.omega[a],
+                                                  wb, self.state.rad(a), rb, n), n)
+            mt = ti.static(TANGENTIAL_MASS) * self.meff[s]
+            new = clamped(old - mt * ut, limit)
+            self.lam_t[s] = new
+            self.push_tangent(a, b, n, new - old)
+            out = (new - old).norm() / mt
+        return out
 
     @ti.func
     def rolling_row(self, s):
         """One update of row s's rolling (and twisting) impulse; returns the change of
-        the relative spin times r_a it made [m/s]."""
-        a = self.row_a[s]
-        b = self.row_b[s]
-        wrel = self.state.omega[a]
-        k = self.state.inv_inertia_of(a)
-        if b >= 0:
-            wrel = wrel - self.state.omega[b]
-            k += self.state.inv_inertia_of(b)
+        the relative spin times r_a it made [m/s]. Idle, as friction_row, where its
+        bound is zero and it holds no impulse."""
         old = self.lam_r[s]
-        new = rolling_bounded(old - wrel / k, self.normal[s], self.rolling_limit(s))
-        self.lam_r[s] = new
-        self.push_rolling(a, b, new - old)
-        return (new - old).norm() * k * self.state.rad(a)
+        limit = self.rolling_limit(s)
+        out = ti.cast(0, self.real)
+        if limit > 0 or not idle(old):
+            a = self.row_a[s]
+            b = self.row_b[s]
+            wrel = self.state.omega[a]
+            k = self.state.inv_inertia_of(a)
+            if b >= 0:
+                wrel = wrel - self.state.omega[b]
+                k += self.state.inv_inertia_of(b)
+            new = rolling_bounded(old - wrel / k, self.normal[s], limit)
+            self.lam_r[s] = new
+            self.push_rolling(a, b, new - old)
+            out = (new - old).norm() * k * self.state.rad(a)
+        return out
 
     @ti.func
     def warm_friction(self, s):
