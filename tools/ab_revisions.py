@@ -23,6 +23,9 @@ more steps.
     python tools/ab_revisions.py HEAD~1 HEAD --pour-bed --pour-seeds 8 --rounds 1
     python tools/ab_revisions.py HEAD~1 HEAD --silo --rounds 2
     python tools/ab_revisions.py HEAD~1 HEAD --silo --interleaved --repeats 10
+    python tools/ab_revisions.py HEAD~1 HEAD --silo --interleaved --tuning \
+        step_scaled_sweeps=False contact_iterations=60 position_iterations=10
+    python tools/ab_revisions.py HEAD~1 HEAD --pour-bed --interleaved --window 0.05
 
 With ``--silo`` the measure is the frictional silo of tools/kernel_profile.py --silo
 (tools/peer_lammps_silo.py's 1,722 spheres, mu = 0.5, settled, 0.2 s into the
@@ -31,12 +34,14 @@ discharge ``--repeats`` times from one checkpoint (after an untimed pass), 1 thr
 and reports the fastest wall ms per step. Two revisions that keep the same bits run the
 same steps, so the ratio of ms per step is the ratio of their costs.
 
-With ``--silo --interleaved`` both revisions run in one process on one Taichi runtime
-(revision B's package imported under another name, its tools/silo.py bound to it),
-from the same settled fill, and their windows alternate A, B, A, B, ...: a shared
-machine whose speed drifts from minute to minute slows both alike, where separate
-processes a minute apart can differ by 30 %. Reported: per revision the fastest and
-the median window, and the median of the per-pair ratios B / A.
+With ``--interleaved`` (and ``--silo`` or ``--pour-bed``) both revisions run in one
+process on one Taichi runtime (revision B's package imported under another name, its
+tools/silo.py bound to it), from the same start (the silo's settled fill, 0.2 s into
+its discharge; the pour at 1 s), and their windows of ``--window`` s alternate A, B,
+A, B, ... ``--repeats`` times, each from its revision's checkpoint: a shared machine
+whose speed drifts from minute to minute slows both alike, where separate processes a
+minute apart can differ by 30 %. Reported: per revision the fastest and the median
+window, and the median of the per-pair ratios B / A.
 """
 from __future__ import annotations
 
@@ -138,12 +143,13 @@ print("windows", *times)
 """
 
 
-#: --silo --interleaved: run in this checkout with the two worktrees as argv[1:3];
-#: then window [s], repeats
+#: --interleaved: run in this checkout; argv: the two worktrees, "silo" or "pour",
+#: window [s], repeats and (silo) tools/silo.py's --tuning items
 INTERLEAVED = """
 import importlib.util, statistics, sys, time
 sys.path.insert(0, "tools")
-tree_a, tree_b, window, repeats = sys.argv[1], sys.argv[2], float(sys.argv[3]), int(sys.argv[4])
+tree_a, tree_b, what = sys.argv[1:4]
+window, repeats, tuning = float(sys.argv[4]), int(sys.argv[5]), sys.argv[6:]
 
 def load(path, name):
     spec = importlib.util.spec_from_file_location(
@@ -178,14 +184,20 @@ ts_a, silo_a = package(tree_a, "revision_a")
 ts_b, silo_b = package(tree_b, "revision_b")
 import peer_lammps_silo
 from machine import untimed_pass
-a = peer_lammps_silo.settings([])
 rt = ts_a.runtime.ensure("cpu", "f64", threads=1)
 ts_b.runtime._current, ts_b.runtime._generation = rt, ts_a.runtime._generation
-settled = silo_a.settled_fill(a, a.fill, seed=1)
-sims = [silo.discharging(a, settled, a.orifice * a.radius) for silo in (silo_a, silo_b)]
+if what == "silo":
+    a = peer_lammps_silo.settings(["--tuning", *tuning] if tuning else [])
+    settled = silo_a.settled_fill(a, a.fill, seed=1)
+    sims = [silo.discharging(a, settled, a.orifice * a.radius) for silo in (silo_a, silo_b)]
+    start = 0.2
+else:
+    sims = [ts.Simulation(ts.load_scene("scenes/pour.toml"), threads=1)
+            for ts in (ts_a, ts_b)]
+    start = 1.0
 starts = []
 for sim in sims:
-    sim.advance(0.2)
+    sim.advance(start)
     untimed_pass(sim, lambda s: s.advance(window))
     starts.append(sim.checkpoint())
 times = [[], []]
@@ -202,11 +214,12 @@ for k in range(2):
 """
 
 
-def silo_interleaved(trees: tuple, window: float, repeats: int) -> tuple:
+def interleaved(trees: tuple, what: str, window: float, repeats: int, tuning=()) -> tuple:
     """([A's wall s per step per window], [B's], (A's steps, B's)) of ``window`` s of
-    the silo's discharge, both revisions' windows alternating in one process."""
-    out = subprocess.run([sys.executable, "-c", INTERLEAVED, *trees, str(window),
-                          str(repeats)], capture_output=True, text=True, cwd=ROOT)
+    the silo's discharge (``what`` "silo") or the pour's bed ("pour"), both revisions'
+    windows alternating in one process (``tuning``: tools/silo.py's --tuning items)."""
+    out = subprocess.run([sys.executable, "-c", INTERLEAVED, *trees, what, str(window),
+                          str(repeats), *tuning], capture_output=True, text=True, cwd=ROOT)
     if out.returncode != 0:
         raise RuntimeError(f"the interleaved run failed:\n{out.stderr[-3000:]}")
     steps = re.search(r"^steps ([0-9]+) ([0-9]+)$", out.stdout, re.M)
@@ -217,12 +230,13 @@ def silo_interleaved(trees: tuple, window: float, repeats: int) -> tuple:
     return a, b, (int(steps.group(1)), int(steps.group(2)))
 
 
-def silo_interleaved_main(args) -> int:
-    """--silo --interleaved: both revisions in one process, windows alternating."""
+def interleaved_main(args) -> int:
+    """--interleaved: both revisions in one process, windows alternating."""
     a_rev, b_rev = args.rev_a, args.rev_b
     with worktrees(a_rev, b_rev) as trees:
-        a, b, steps = silo_interleaved((trees[a_rev], trees[b_rev]), args.window,
-                                       args.repeats)
+        a, b, steps = interleaved((trees[a_rev], trees[b_rev]),
+                                  "silo" if args.silo else "pour", args.window,
+                                  args.repeats, args.tuning)
     for rev, times in ((a_rev, a), (b_rev, b)):
         print(f"{rev}: fastest {1e3 * min(times):.2f}, median "
               f"{1e3 * statistics.median(times):.2f} ms per step ("
@@ -323,21 +337,29 @@ def main(argv=None):
     p.add_argument("--repeats", type=int, default=None,
                    help="with --silo: timed windows (default 5)")
     p.add_argument("--interleaved", action="store_true",
-                   help="with --silo: both revisions in one process, windows alternating")
+                   help="with --silo or --pour-bed: both revisions in one process, "
+                        "windows alternating")
+    p.add_argument("--tuning", nargs="+", default=[], metavar="NAME=VALUE",
+                   help="with --silo --interleaved: Tuning.with_ keywords of the silo's run")
     args = p.parse_args(argv)
     if args.pour_seeds < 0 or (args.pour_seeds and not args.pour_bed):
         p.error("--pour-seeds takes a count >= 0 and needs --pour-bed")
     if args.silo and args.pour_bed:
         p.error("give --silo or --pour-bed, not both")
-    if not args.silo and (args.window is not None or args.repeats is not None
-                          or args.interleaved):
-        p.error("--window, --repeats and --interleaved need --silo")
-    if args.silo:
+    if args.interleaved and not (args.silo or args.pour_bed) or args.pour_seeds and \
+            args.interleaved:
+        p.error("--interleaved needs --silo or --pour-bed (without --pour-seeds)")
+    if not (args.silo or args.interleaved) and (args.window is not None or
+                                                args.repeats is not None):
+        p.error("--window and --repeats need --silo or --interleaved")
+    if args.tuning and not (args.interleaved and args.silo):
+        p.error("--tuning needs --silo --interleaved")
+    if args.silo or args.interleaved:
         args.window = 0.1 if args.window is None else args.window
         args.repeats = 5 if args.repeats is None else args.repeats
         if not (math.isfinite(args.window) and args.window > 0) or args.repeats < 1:
             p.error("--window takes seconds > 0 and --repeats a count >= 1")
-        return silo_interleaved_main(args) if args.interleaved else silo_main(args)
+        return interleaved_main(args) if args.interleaved else silo_main(args)
     unit = "simulated s per wall s (pour bed, 1 thread)" if args.pour_bed else \
         "sphere-steps/s"
     with worktrees(args.rev_a, args.rev_b) as trees:
