@@ -30,3 +30,17 @@ def test_worktrees_go_when_the_block_fails():
             raise RuntimeError("stop")
     assert not os.path.exists(tree)
     assert os.path.realpath(tree) not in listed_worktrees()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--interleaved"], "--interleaved needs --silo or --pour-bed"),
+    (["--pour-bed", "--pour-seeds", "2", "--interleaved"], "without --pour-seeds"),
+    (["--silo", "--tuning", "relaxation=1.0"], "--tuning needs --silo --interleaved"),
+    (["--window", "0.1"], "--window and --repeats need --silo or --interleaved"),
+    (["--pour-bed", "--interleaved", "--window", "0"], "--window takes seconds > 0"),
+])
+def test_bad_option_combinations_are_refused(argv, message, capsys):
+    """The interleaved mode's options are checked before any worktree is made."""
+    with pytest.raises(SystemExit):
+        ab_revisions.main(["HEAD~1", "HEAD", *argv])
+    assert message in capsys.readouterr().err
