@@ -22,6 +22,7 @@ flight.
 
     python tools/kernel_profile.py --scene scenes/pour.toml --at 1.0 --window 0.2
     python tools/kernel_profile.py --silo --write
+    python tools/kernel_profile.py --silo --tuning step_scaled_sweeps=False contact_iterations=60
     python tools/kernel_profile.py --gas 10000 --arch cuda --window 0.02 --host
     python tools/kernel_profile.py --silo-large 100000 --arch cuda --window 0.01
 """
