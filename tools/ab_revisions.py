@@ -35,13 +35,16 @@ and reports the fastest wall ms per step. Two revisions that keep the same bits 
 same steps, so the ratio of ms per step is the ratio of their costs.
 
 With ``--interleaved`` (and ``--silo`` or ``--pour-bed``) both revisions run in one
-process on one Taichi runtime (revision B's package imported under another name, its
-tools/silo.py bound to it), from the same start (the silo's settled fill, 0.2 s into
-its discharge; the pour at 1 s), and their windows of ``--window`` s alternate A, B,
-A, B, ... ``--repeats`` times, each from its revision's checkpoint: a shared machine
-whose speed drifts from minute to minute slows both alike, where separate processes a
-minute apart can differ by 30 %. Reported: per revision the fastest and the median
-window, and the median of the per-pair ratios B / A.
+process on one Taichi runtime: each revision's package is imported from its worktree
+under a name of its own, with this checkout's tools/silo.py bound to it (the silo's
+settings, its --tuning names and scenes/pour.toml are this checkout's too). Both start
+from the same state (the silo's fill settled by revision A, 0.2 s into its discharge;
+the pour at 1 s), and their windows of ``--window`` s alternate ``--repeats`` times,
+A B, then B A, each from its revision's checkpoint: a shared machine whose speed
+drifts from minute to minute slows both alike, where separate processes a minute
+apart can differ by 30 %. Reported: per revision the fastest and the median window,
+and the median of the per-pair ratios B / A (``--rounds``, ``--n`` and
+``--precision`` do not apply).
 """
 from __future__ import annotations
 
@@ -200,14 +203,15 @@ for sim in sims:
     sim.advance(start)
     untimed_pass(sim, lambda s: s.advance(window))
     starts.append(sim.checkpoint())
-times = [[], []]
-for _ in range(repeats):
-    for k, sim in enumerate(sims):
-        sim.restore(starts[k])
-        s0, t0 = sim.stats["steps"], time.perf_counter()
-        sim.advance(window)
-        times[k].append((time.perf_counter() - t0) / (sim.stats["steps"] - s0))
-steps = [sim.stats["steps"] - s0 for sim in sims]
+assert ts_a.runtime._current is rt and ts_b.runtime._current is rt, "Taichi re-initialised"
+times, steps = [[], []], [0, 0]
+for r in range(repeats):
+    for k in ((0, 1) if r % 2 == 0 else (1, 0)):     # A B, B A, ...: neither always first
+        sims[k].restore(starts[k])
+        s0, t0 = sims[k].stats["steps"], time.perf_counter()
+        sims[k].advance(window)
+        steps[k] = sims[k].stats["steps"] - s0
+        times[k].append((time.perf_counter() - t0) / steps[k])
 print("steps", *steps)
 for k in range(2):
     print("windows", *times[k])
@@ -333,9 +337,9 @@ def main(argv=None):
     p.add_argument("--silo", action="store_true",
                    help="measure the frictional silo's discharge (wall ms per step)")
     p.add_argument("--window", type=float, default=None,
-                   help="with --silo: seconds timed (default 0.1)")
+                   help="with --silo or --interleaved: seconds timed (default 0.1)")
     p.add_argument("--repeats", type=int, default=None,
-                   help="with --silo: timed windows (default 5)")
+                   help="with --silo or --interleaved: timed windows (default 5)")
     p.add_argument("--interleaved", action="store_true",
                    help="with --silo or --pour-bed: both revisions in one process, "
                         "windows alternating")

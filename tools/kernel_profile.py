@@ -118,6 +118,8 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.tuning and not args.silo:
         ap.error("--tuning goes with --silo")
+    if args.tuning and args.write:
+        ap.error("--write keeps the defaults' profile: run --tuning without it")
     if [args.scene is not None, args.silo, args.gas != 0, args.silo_large != 0].count(True) != 1:
         ap.error("give one of --scene TOML, --gas N, --silo or --silo-large N")
     if args.gas < 0 or args.silo_large < 0:

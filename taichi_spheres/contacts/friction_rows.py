@@ -106,9 +106,10 @@ class FrictionRows:
     def friction_row(self, s):
         """One update of row s's tangential impulse; returns the change of the
         tangential contact velocity it made [m/s]. A row whose disc has shrunk to a
-        point (mu lambda_n = 0: a speculative row, or a contact the normal row has
-        opened) and that holds no tangential impulse is left as it is: the update
-        would clamp it to zero again and change nothing (idle)."""
+        point (mu lambda_n = 0: a speculative row, a contact the normal row has opened,
+        mu = 0) and that holds no tangential impulse is left as it is: the update
+        would clamp it to zero again and change nothing but, at most, the sign of an
+        exact zero (idle)."""
         old = self.lam_t[s]
         limit = self.row_friction(s) * self.lam[s]
         out = ti.cast(0, self.real)
