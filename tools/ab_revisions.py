@@ -149,39 +149,36 @@ print("windows", *times)
 #: --interleaved: run in this checkout; argv: the two worktrees, "silo" or "pour",
 #: window [s], repeats and (silo) tools/silo.py's --tuning items
 INTERLEAVED = """
-import importlib.util, statistics, sys, time
+import importlib.util, sys, time
 sys.path.insert(0, "tools")
 tree_a, tree_b, what = sys.argv[1:4]
 window, repeats, tuning = float(sys.argv[4]), int(sys.argv[5]), sys.argv[6:]
 
-def load(path, name):
+def load(path, name, folder=None):
+    # the module file ``path`` as ``name`` (``folder``: a package's, for its submodules)
     spec = importlib.util.spec_from_file_location(
-        name, path + "/__init__.py", submodule_search_locations=[path])
+        name, path, submodule_search_locations=None if folder is None else [folder])
     module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
+    if folder is not None:
+        sys.modules[name] = module
     spec.loader.exec_module(module)
     return module
 
 def package(tree, name):
     # the package of a worktree as ``name``; the tools' silo.py bound to it
-    ts = load(tree + "/taichi_spheres", name)
+    folder = tree + "/taichi_spheres"
+    ts = load(folder + "/__init__.py", name, folder)
     saved = {k: v for k, v in sys.modules.items() if k == "taichi_spheres" or
              k.startswith("taichi_spheres.")}
     for k in list(saved):
         del sys.modules[k]
     sys.modules["taichi_spheres"] = ts
     sys.modules["taichi_spheres.config"] = ts.config
-    silo = load_file("tools/silo.py", "silo_" + name)
+    silo = load("tools/silo.py", "silo_" + name)
     for k in ("taichi_spheres", "taichi_spheres.config"):
         del sys.modules[k]
     sys.modules.update(saved)
     return ts, silo
-
-def load_file(path, name):
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 ts_a, silo_a = package(tree_a, "revision_a")
 ts_b, silo_b = package(tree_b, "revision_b")
