@@ -14,7 +14,7 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["Discharged", "in_sinks", "discharge", "renumber_warm", "free_spots",
+__all__ = ["Discharged", "in_sinks", "discharge", "without", "renumber_warm", "free_spots",
            "DROPPED_PARTNER"]
 
 #: warm_key of a warm-start row whose partner a sink took out: no sphere's index and no
@@ -115,20 +115,43 @@ def discharge(scene, rows, warm, dtype, rng):
         else:
             x[back], v[back], omega[back] = spots, 0.0, 0.0
     taken = out | back
-    energy = sphere_energy(np.array(rows[0], dtype=np.float64)[taken],
-                           np.array(rows[1], dtype=np.float64)[taken],
-                           np.array(rows[2], dtype=np.float64)[taken], scene.radius[taken],
-                           scene.mass[taken], scene.gravity).sum()
+    gone = taken_out(scene, taken, [np.array(a, dtype=np.float64)[taken] for a in rows])
     # a recycled sphere re-enters at rest: its new potential energy comes in
-    energy -= sphere_energy(x[back], v[back], omega[back], scene.radius[back],
-                            scene.mass[back], scene.gravity).sum()
-    gone = Discharged(count=int(taken.sum()), mass=float(scene.mass[taken].sum()),
-                      energy=float(energy))
+    gone.energy = float(gone.energy - sphere_energy(
+        x[back], v[back], omega[back], scene.radius[back], scene.mass[back],
+        scene.gravity).sum())
     if not out.any():
         return scene, (x, v, omega), warm, gone
     keep = ~out
     gone.kept = keep
-    smaller = dataclasses.replace(scene, x=x[keep], v=v[keep], radius=scene.radius[keep],
-                                  mass=scene.mass[keep], omega=omega[keep],
-                                  material=scene.material[keep])
-    return smaller, (x[keep], v[keep], omega[keep]), renumber_warm(warm, keep), gone
+    return (remaining(scene, keep, x[keep], v[keep], omega[keep]),
+            (x[keep], v[keep], omega[keep]), renumber_warm(warm, keep), gone)
+
+
+def taken_out(scene, taken: np.ndarray, rows) -> Discharged:
+    """Count, mass [kg] and energy [J] of the spheres ``taken`` ((N,) bool) whose
+    x, v, omega are ``rows`` ((k, 3) float64 each, in index order)."""
+    energy = sphere_energy(*rows, scene.radius[taken], scene.mass[taken], scene.gravity)
+    return Discharged(count=int(taken.sum()), mass=float(scene.mass[taken].sum()),
+                      energy=float(energy.sum()))
+
+
+def remaining(scene, keep: np.ndarray, x, v, omega):
+    """The scene of the spheres ``keep`` ((N,) bool) with positions, velocities and
+    spins x, v, omega ((n, 3) each) (arrays replaced without validation)."""
+    return dataclasses.replace(scene, x=x, v=v, radius=scene.radius[keep],
+                               mass=scene.mass[keep], omega=omega,
+                               material=scene.material[keep])
+
+
+def without(scene, keep: np.ndarray, taken_rows):
+    """After the engine took the spheres not in ``keep`` ((N,) bool) out of its fields
+    (takeout.py): (the scene of those that stay, Discharged). ``taken_rows``: (k, 9)
+    x, v, omega of the taken ones in index order. The scene keeps its x, v, omega
+    rows for the spheres that stay (the state itself is in the fields)."""
+    taken = ~keep
+    rows = np.asarray(taken_rows, dtype=np.float64)
+    gone = taken_out(scene, taken, [np.ascontiguousarray(rows[:, c:c + 3]) for c in (0, 3, 6)])
+    gone.kept = keep
+    omega = scene.omega if scene.omega is not None else np.zeros_like(scene.v)
+    return remaining(scene, keep, scene.x[keep], scene.v[keep], omega[keep]), gone

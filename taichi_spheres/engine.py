@@ -31,6 +31,7 @@ from .grid import Grid, GridGeometry
 from .params import StepParams
 from .projection import Projection
 from .state import Features, SphereState
+from .takeout import SinkTakeOut
 from .walls import Motion
 
 __all__ = ["Schedule", "EngineKey", "Engine", "acquire", "capacity_for"]
@@ -129,7 +130,9 @@ class Engine:
                                     cpu=key.serial_heavy or key.serial_few) \
             if f.contacts else None
         self._fused = None
+        self._take_out = None      # takeout.SinkTakeOut, built on first use
         self._occupant = None      # weakref to the Simulation bound last
+        self._scalars = None       # what the scene's scalars were loaded from (bind)
 
     def release(self, sim) -> None:
         """Forget that ``sim`` is bound (its scene changed: the next bind loads it all)."""
@@ -171,6 +174,7 @@ class Engine:
             if warm is not None:
                 self.solver.load_warm(warm)
         self._occupant = weakref.ref(sim)
+        self._scalars = scalar_sources(scene, reach)
 
     def keep_spheres(self, sim, x, v, omega, kept, reach=None) -> None:
         """After a sink took spheres out of ``sim`` (bound here): load ``sim.scene``, the
@@ -186,6 +190,44 @@ class Engine:
         self.contacts.bind(scene, sim.geometry)
         if self.solver is not None:
             self.solver.keep_spheres(scene, sim.geometry, reach, kept)
+        self._scalars = scalar_sources(scene, reach)
+
+    def take_out(self, sim):
+        """Take the spheres in ``sim``'s sinks (bound here; none of them recycles) out
+        of the fields in one launch (takeout.py); returns (indices (k,), rows (k, 9):
+        x, v, omega) of the k taken, in the fields' precision. Call
+        :meth:`after_take_out` once ``sim.scene`` holds the spheres that stay."""
+        if not self.bound_to(sim):
+            raise RuntimeError("take_out: the Simulation is not the one bound here")
+        if self._take_out is None:
+            self._take_out = SinkTakeOut(self.state, self.params, self.contacts, self.solver)
+        return self._take_out.run()
+
+    def after_take_out(self, sim, reach=None) -> None:
+        """The scalars bind loads from ``sim.scene`` (now the spheres that stay) and the
+        rows' reach [m], loaded again where those they follow from changed (the
+        first sphere's radius and mass, the smallest and largest radius, the reach);
+        the near lists forgotten (their indices are the old ones)."""
+        scene = sim.scene
+        self.state.n = scene.n
+        sources = scalar_sources(scene, reach)
+        if sources != self._scalars:
+            self.state.bind_uniform(scene)
+            self.contacts.bind_scalars(scene, sim.geometry)
+            if self.solver is not None:
+                self.solver.bind_scalars(scene, sim.geometry, reach)
+            self._scalars = sources
+        self.contacts.n = scene.n
+        self.contacts.near_ready = False
+        if self.solver is not None:
+            self.solver.n = scene.n
+
+
+def scalar_sources(scene, reach) -> tuple:
+    """What the scalars bind loads follow from besides the grid: the first sphere's
+    radius [m] and mass [kg], the smallest and largest radius [m], the rows' reach [m]."""
+    return (float(scene.radius[0]), float(scene.mass[0]), float(scene.radius.min()),
+            float(scene.radius.max()), reach)
 
 
 #: A new engine has room for at least this many spheres and cells (small scenes share

@@ -204,6 +204,17 @@ class StepParams:
         self.geo.from_numpy(table.astype(self._value_host.dtype))
         self.n_geo[None] = len(geometry)
 
+    @ti.func
+    def in_a_sink(self, x) -> bool:
+        """Whether the point x [m] is in a sink region [sink_lo, sink_hi) (as
+        discharge.in_sinks compares on the host, in the fields' precision)."""
+        inside = False
+        for k in range(self.n_sinks[None]):
+            if (x >= self.sink_lo[k]).all():
+                if (x < self.sink_hi[k]).all():
+                    inside = True
+        return inside
+
     def read_back(self):
         """This step's counters as one namespace (attributes named as COUNTS and VALUES:
         ints and floats), read in one launch."""

@@ -478,15 +478,13 @@ class Simulation:
         dtype = np.float64 if self.precision == "f64" else np.float32
         # (the move is one serial loop: a GPU reloads through the host instead)
         in_place = self.tuning.performance.discharge_in_place and self.runtime.is_cpu
+        if in_place and not any(s.recycle for s in self.scene.sinks):
+            self._take_out_in_place()
+            return
         scene, rows, warm, gone = discharge.discharge(
             self.scene, self._engine.state.rows(), None if in_place else self._warm_rows(),
             dtype, self._sink_rng)
-        t = self._totals
-        t["discharged"] += gone.count
-        t["discharged_mass"] += gone.mass
-        t["energy_discharged"] += gone.energy
-        if gone.kept is not None:
-            self.sphere_ids = self.sphere_ids[gone.kept]
+        self._book_discharge(gone)
         self.scene = scene
         if not in_place or scene.n == 0:
             self._parked = rows + (warm,)
@@ -505,6 +503,37 @@ class Simulation:
         # recycled spheres that found no free spot stay in their sink: substeps end a
         # step only where more spheres than these are in sinks
         self._stuck_in_sinks = int(discharge.in_sinks(rows[0], scene.sinks, dtype).sum())
+
+    def _take_out_in_place(self):
+        """_discharge for sinks that do not recycle, in the engine's fields (one launch,
+        Engine.take_out); only the taken spheres' rows come to the host."""
+        taken, rows = self._engine.take_out(self)
+        keep = np.ones(self.n, dtype=bool)
+        keep[taken] = False
+        scene, gone = discharge.without(self.scene, keep, rows)
+        self._book_discharge(gone)
+        self.scene = scene
+        self._stuck_in_sinks = 0            # every sphere in a sink has left
+        if scene.n == 0:                    # every sphere has left: time still runs
+            empty = np.zeros((0, 3))
+            self._parked = (empty, empty, empty, None)
+            self._engine.release(self)
+            self._vmax2 = self._vmax2_near = 0.0
+            return
+        self._engine.after_take_out(self, self._reach())
+        self._vmax2 = float(self._engine.params.vmax2[None])    # (the kernel measured it)
+        # fewer spheres: the bound can only go down
+        self._vmax2_near = min(self._vmax2_near, self._vmax2)
+
+    def _book_discharge(self, gone) -> None:
+        """Count a discharge's spheres, mass and energy in the totals; keep the ids of
+        the spheres that stay."""
+        t = self._totals
+        t["discharged"] += gone.count
+        t["discharged_mass"] += gone.mass
+        t["energy_discharged"] += gone.energy
+        if gone.kept is not None:
+            self.sphere_ids = self.sphere_ids[gone.kept]
 
     #: stats totals that add up the step counter of the same name (params.COUNTS/VALUES)
     _SUMMED = ("pair_collisions", "wall_collisions", "wall_rests", "multi_collision_spheres",

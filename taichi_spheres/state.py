@@ -216,14 +216,19 @@ class SphereState:
             raise ValueError(f"{scene.n} spheres do not fit fields for {self.capacity}")
         self.n = scene.n
         self.n_spheres[None] = scene.n
-        self.r0[None] = float(scene.radius[0])
-        self.m0[None] = float(scene.mass[0])
-        self.set_uniform_inverses()
+        self.bind_uniform(scene)
         self.load(x, v, scene.radius, scene.mass, omega)
         if self.features.materials:
             index = np.zeros(self.capacity, dtype=np.int32)
             index[:scene.n] = scene.material
             self.material.from_numpy(index)
+
+    def bind_uniform(self, scene: Scene):
+        """r0, m0 [m, kg]: the radius and mass of the scene's first sphere (those of
+        every sphere where they are equal), and their inverses (set_uniform_inverses)."""
+        self.r0[None] = float(scene.radius[0])
+        self.m0[None] = float(scene.mass[0])
+        self.set_uniform_inverses()
 
     @ti.kernel
     def set_uniform_inverses(self):
@@ -271,6 +276,23 @@ class SphereState:
     def rows(self):
         """(x, v, omega) of the bound scene in the field precision, (n, 3) each."""
         return self._rows()
+
+    @ti.func
+    def move_sphere(self, i, j):
+        """Sphere i's position, velocity, spin, radius, inverse mass and inertia and
+        material to index j (the per-step bookkeeping, moved and hits, stays)."""
+        self.x[j] = self.x[i]
+        self.v[j] = self.v[i]
+        if ti.static(self.features.friction):
+            self.omega[j] = self.omega[i]
+        if ti.static(not self.features.equal_radii):
+            self.radius[j] = self.radius[i]
+        if ti.static(not self.features.equal_masses):
+            self.inv_mass[j] = self.inv_mass[i]
+        if ti.static(self.per_sphere_inertia):
+            self.inv_inertia[j] = self.inv_inertia[i]
+        if ti.static(self.features.materials):
+            self.material[j] = self.material[i]
 
     @ti.func
     def rad(self, i):

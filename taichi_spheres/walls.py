@@ -93,15 +93,7 @@ class Motion(Surfaces):
     @ti.func
     def count_in_sinks(self, i):
         """Count sphere i in params.in_sinks if its centre is in a sink region."""
-        x = self.state.x[i]
-        inside = 0
-        for k in range(self.params.n_sinks[None]):
-            lo = self.params.sink_lo[k]
-            hi = self.params.sink_hi[k]
-            if (x >= lo).all():
-                if (x < hi).all():
-                    inside = 1
-        if inside == 1:
+        if self.params.in_a_sink(self.state.x[i]):
             ti.atomic_add(self.params.in_sinks[None], 1)
 
     @ti.func

@@ -199,6 +199,15 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
     def bind(self, scene, geom):
         """Load what the kernels read of a scene and its grid geometry ``geom`` (after
         state.bind and grid.bind); forget the near lists and any pending pairs."""
+        self.bind_scalars(scene, geom)
+        self.active.fill(0)
+        self.n_active[None] = 0
+        self.n_touched[None] = 0
+
+    def bind_scalars(self, scene, geom):
+        """bind's values that follow from the scene and ``geom``: the sphere count,
+        colours, half the first sphere's mass, the walks' reach and the near lists'
+        reach; the near lists are forgotten (their sphere indices are the scene's)."""
         self.n = scene.n
         self.colours = geom.colours
         self.axis_colours[None] = [len(geom.axis_colours(a)) for a in range(3)]
@@ -216,9 +225,6 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
             self.near_reach2[None] = self.near_reach ** 2
             self.near_allowance2[None] = allowance * allowance
         self.near_ready = False
-        self.active.fill(0)
-        self.n_active[None] = 0
-        self.n_touched[None] = 0
 
     # ---- the step's entry points ----
     def detect(self):

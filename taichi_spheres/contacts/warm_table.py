@@ -86,21 +86,33 @@ class WarmTable:
         for i in range(n_old):
             j = new_index[i]
             if j >= 0:
-                used = self.warm_n[i]
-                for t in ti.static(range(self.perf.warm_slots)):
-                    key = self.warm_key[i, t]
-                    if t < used and key >= 0 and key < n_old:
-                        key = ti.select(new_index[key] >= 0, new_index[key], DROPPED_PARTNER)
-                    self.warm_key[j, t] = key
-                    self.warm_lam[j, t] = self.warm_lam[i, t]
-                    if ti.static(self.f.friction):
-                        self.warm_t[j, t] = self.warm_t[i, t]
-                    if ti.static(self.f.rolling):
-                        self.warm_r[j, t] = self.warm_r[i, t]
-                self.warm_n[j] = used
-                self.state.loaded[j] = self.state.loaded[i]
-                self.state.near[j] = self.state.near[i]
+                self.move_warm_row(i, j, new_index, n_old)
         for i in range(n_new, n_old):
-            self.warm_n[i] = 0
-            self.state.loaded[i] = 0
-            self.state.near[i] = 0
+            self.empty_warm_row(i)
+
+    @ti.func
+    def move_warm_row(self, i, j, new_index: ti.template(), n_old):
+        """Sphere i's warm-start rows, loaded and near flags to row j <= i, the partners
+        b in [0, n_old) of its rows in use renumbered to new_index[b] (DROPPED_PARTNER
+        where new_index[b] < 0). ``new_index``: (n_old,) i32, a field or an ndarray."""
+        used = self.warm_n[i]
+        for t in ti.static(range(self.perf.warm_slots)):
+            key = self.warm_key[i, t]
+            if t < used and key >= 0 and key < n_old:
+                key = ti.select(new_index[key] >= 0, new_index[key], DROPPED_PARTNER)
+            self.warm_key[j, t] = key
+            self.warm_lam[j, t] = self.warm_lam[i, t]
+            if ti.static(self.f.friction):
+                self.warm_t[j, t] = self.warm_t[i, t]
+            if ti.static(self.f.rolling):
+                self.warm_r[j, t] = self.warm_r[i, t]
+        self.warm_n[j] = used
+        self.state.loaded[j] = self.state.loaded[i]
+        self.state.near[j] = self.state.near[i]
+
+    @ti.func
+    def empty_warm_row(self, i):
+        """Row i of the table (a sphere index no longer in use) holds no rows."""
+        self.warm_n[i] = 0
+        self.state.loaded[i] = 0
+        self.state.near[i] = 0
