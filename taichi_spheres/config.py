@@ -197,6 +197,10 @@ class Performance:
         whose rows that thread sweeps interleaved (contacts/pgs.py sweep_cells; a GPU
         sweeps one cell per thread): a row update waits on the previous one of its
         cell, and the processor overlaps the other cells' updates meanwhile.
+    frictional_interleave: solver_interleave for scenes with friction, whose row
+        updates (normal, tangential and rolling parts) keep more values in registers:
+        fewer cells at a time keep them there (tools/solver_interleave.py; the same
+        bits for any count).
     parallel_interleave: the same for sweeps running in parallel on several CPU
         threads (1: one cell per loop iteration; on 2 cores 8 measured no faster:
         tools/solver_interleave.py).
@@ -235,15 +239,17 @@ class Performance:
     contacts_per_sphere: int = 8
     warm_slots: int = 16
     solver_interleave: int = 8
+    frictional_interleave: int = 4
     parallel_interleave: int = 1
     sweeps_per_wait: int = 1
     gpu_sweeps_per_wait: int = 8
     discharge_in_place: bool = True
 
     def __post_init__(self):
-        """ValueError naming the field: solver_interleave, parallel_interleave or a
-        sweeps_per_wait below 1."""
-        _require_at_least(self, ("solver_interleave", "parallel_interleave",
+        """ValueError naming the field: solver_interleave, frictional_interleave,
+        parallel_interleave or a sweeps_per_wait below 1."""
+        _require_at_least(self, ("solver_interleave", "frictional_interleave",
+                                 "parallel_interleave",
                                  "sweeps_per_wait", "gpu_sweeps_per_wait"), 1)
 
 

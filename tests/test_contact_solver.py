@@ -162,6 +162,7 @@ def test_over_relaxed_sweeps_hold_the_heavy_on_light_column(arch, precision):
 
 @pytest.mark.parametrize("name, value", [("relaxation", 2.0), ("relaxation", 0.0),
                                          ("solver_interleave", 0),
+                                         ("frictional_interleave", 0),
                                          ("parallel_interleave", 0),
                                          ("sweeps_per_wait", 0),
                                          ("gpu_sweeps_per_wait", 0),

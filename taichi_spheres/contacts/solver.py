@@ -124,11 +124,13 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.perf = tuning.performance
         self.capacity = self.perf.contacts_per_sphere * state.capacity
         # cells one thread sweeps interleaved (pgs.sweep_cells): serial sweeps, and
-        # parallel ones on a one-thread runtime, take Performance.solver_interleave,
-        # parallel ones on several threads parallel_interleave; a GPU hides latency
-        # with more threads instead
+        # parallel ones on a one-thread runtime, take Performance.solver_interleave
+        # (frictional_interleave with friction), parallel ones on several threads
+        # parallel_interleave; a GPU hides latency with more threads instead
         cfg = ti.lang.impl.current_cfg()
-        self.interleave = self.perf.solver_interleave if cpu else 1
+        one_thread = (self.perf.frictional_interleave if features.friction
+                      else self.perf.solver_interleave)
+        self.interleave = one_thread if cpu else 1
         self.interleave_parallel = (self.interleave if cfg.cpu_max_num_threads == 1 else
                                     self.perf.parallel_interleave) if cpu else 1
         # loop iterations per task of a parallel sweep on the CPU: as many cells as
