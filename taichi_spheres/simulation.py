@@ -471,10 +471,12 @@ class Simulation:
         self._bind()
 
     def _discharge(self):
-        """Take the spheres in sinks out (discharge.py) and continue with the others on
-        the same engine: their warm start moved down in the fields (Engine.keep_spheres;
-        on the CPU with Performance.discharge_in_place), or every table read to the
-        host, renumbered there and loaded again with the scene (the same bits)."""
+        """Take the spheres in sinks out and continue with the others on the same engine:
+        on the CPU with Performance.discharge_in_place in the engine's fields
+        (Engine.take_out; with a recycling sink on the host, discharge.py, their warm
+        start moved down in the fields, Engine.keep_spheres), or with every table read
+        to the host, renumbered there and loaded again with the scene (the same
+        bits)."""
         dtype = np.float64 if self.precision == "f64" else np.float32
         # (the move is one serial loop: a GPU reloads through the host instead)
         in_place = self.tuning.performance.discharge_in_place and self.runtime.is_cpu

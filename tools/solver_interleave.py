@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """What interleaving cells in the contact solver's sweeps buys on the CPU
-(Performance.solver_interleave, contacts/pgs.py ``sweep_cells``), and that it changes
-no bit.
+(Performance.solver_interleave, frictional_interleave with friction; contacts/pgs.py
+``sweep_cells``), and that it changes no bit.
 
 A projected Gauss-Seidel row update reads the velocities the previous update of its
 cell wrote (rows of a cell share spheres), so one cell's updates form a chain of
@@ -56,7 +56,8 @@ def scenes(path: str) -> dict:
 def timed(scene, start: dict, interleave: int, window: float, repeat: int) -> dict:
     """Fastest wall s per simulated s of ``window`` s from checkpoint ``start``, rows and
     sweeps per step, and the end state's digest, with solver_interleave k."""
-    sim = ts.Simulation(scene, threads=1, tuning=Tuning().with_(solver_interleave=interleave))
+    sim = ts.Simulation(scene, threads=1, tuning=Tuning().with_(
+        solver_interleave=interleave, frictional_interleave=interleave))
     sim.restore(start)
     t_end = sim.time + window
     untimed_pass(sim, lambda s: s.advance_to(t_end))
