@@ -199,8 +199,11 @@ class Engine:
         :meth:`after_take_out` once ``sim.scene`` holds the spheres that stay."""
         if not self.bound_to(sim):
             raise RuntimeError("take_out: the Simulation is not the one bound here")
+        if any(s.recycle for s in sim.scene.sinks):
+            raise ValueError("take_out: a recycling sink puts spheres back (discharge.py)")
         if self._take_out is None:
-            self._take_out = SinkTakeOut(self.state, self.params, self.contacts, self.solver)
+            self._take_out = SinkTakeOut(self.state, self.params, self.motion, self.contacts,
+                                         self.solver)
         return self._take_out.run()
 
     def after_take_out(self, sim, reach=None) -> None:

@@ -319,9 +319,12 @@ class Simulation:
         omega = np.zeros_like(v) if omega is None else np.asarray(omega, dtype=np.float64)
         if x.shape != (self.n, 3) or v.shape != (self.n, 3) or omega.shape != (self.n, 3):
             raise ValueError(f"x, v and omega must have shape ({self.n}, 3)")
-        self._engine.state.load(x, v, self.scene.radius, self.scene.mass, omega)
         if time is not None:
             self.time = float(time)
+        if self.n == 0:        # every sphere has left (a sink): nothing is bound
+            self._vmax2 = self._vmax2_near = 0.0
+            return
+        self._engine.state.load(x, v, self.scene.radius, self.scene.mass, omega)
         self._measure_vmax()
 
     def checkpoint(self) -> dict:
@@ -350,7 +353,7 @@ class Simulation:
                                  f"simulation's {mine!r}")
         self.set_state(ckpt["x"], ckpt["v"], ckpt["time"], ckpt.get("omega"))
         self._vmax2 = float(ckpt["vmax2"])
-        warm = ckpt.get("warm")
+        warm = ckpt.get("warm") if self.n > 0 else None
         substeps_ready = warm is None or "near" in warm or not self._substeps
         # a checkpoint of a run without substeps: every sphere counts as near
         self._vmax2_near = float(ckpt.get("vmax2_near", ckpt["vmax2"])) \
@@ -579,8 +582,9 @@ class Simulation:
             tuning=self.tuning.compiled())
 
     def _bind(self):
-        """Load this Simulation into its engine's fields unless it is the one they hold."""
-        if not self._engine.bound_to(self):
+        """Load this Simulation into its engine's fields unless it is the one they hold
+        (or it has no sphere left: nothing to load)."""
+        if not self._engine.bound_to(self) and self.n > 0:
             x, v, omega, warm = self._parked
             self._engine.bind(self, x, v, self.geometry, self.rest_speed, warm, omega,
                               self._reach())

@@ -1,6 +1,6 @@
 """Sinks in the engine's fields: the spheres whose centre is in a sink taken out in one
 launch, the others moved down to close the gap (walls.py counts them in the drift;
-discharge.py removes them on the host).
+with a recycling sink, or on a GPU, discharge.py removes them on the host instead).
 
 :class:`SinkTakeOut` does in the fields what ``discharge.discharge`` followed by
 ``Engine.keep_spheres`` does through the host for sinks that do not recycle: one
@@ -9,8 +9,8 @@ position, velocity, spin, radius, inverse mass and inertia, material and warm-st
 rows (partners renumbered, contacts/warm_table.py) down to its new index in increasing
 order, so that no row is overwritten before it is read. Only the taken spheres' rows
 come back to the host, for the discharged energy; the remaining spheres' largest
-squared speed goes to params.vmax2 as Motion.measure_vmax measures it, and the
-detection's per-cell counts are cleared as Contacts.bind clears them. The same bits
+squared speed goes to params.vmax2 (Motion.measure_vmax's body), and the detection's
+pending pairs are forgotten as Contacts.bind forgets them (forget_pending). The same bits
 as the host's way (tests/test_discharge.py) without reading and loading every
 sphere's rows, its warm-start table and the scene's constants.
 """
@@ -26,13 +26,14 @@ ROW_WIDTH = 9
 
 @ti.data_oriented
 class SinkTakeOut:
-    """The take-out kernel over an engine's state, params, contacts and contact solver
-    (None without one). ``run()`` returns the taken spheres' indices (k,) and their
-    rows (k, 9) in the fields' precision, in increasing index."""
+    """The take-out kernel over an engine's state, params, motion, contacts and contact
+    solver (None without one). ``run()`` returns the taken spheres' indices (k,) and
+    their rows (k, 9) in the fields' precision, in increasing index."""
 
-    def __init__(self, state, params, contacts, solver):
+    def __init__(self, state, params, motion, contacts, solver):
         self.state = state
         self.params = params
+        self.motion = motion
         self.contacts = contacts
         self.solver = solver
         self.has_solver = solver is not None
@@ -51,7 +52,8 @@ class SinkTakeOut:
             self.move_the_stayers()
             self.empty_the_rest()
             state.n_spheres[None] -= self.n_taken[None]
-            self.measure_vmax_and_clear_cells()
+            self.motion._measure_vmax_body()
+            self.contacts.forget_pending()
             return self.n_taken[None]
 
         self._take_out = take_out
@@ -107,15 +109,3 @@ class SinkTakeOut:
             n_old = self.state.n_spheres[None]
             for i in range(n_old - self.n_taken[None], n_old):
                 self.solver.empty_warm_row(i)
-
-    @ti.func
-    def measure_vmax_and_clear_cells(self):
-        """params.vmax2 = max |v|^2 of the spheres left [m^2/s^2]; the detection's
-        per-cell pair counts and lists emptied (kernel top level)."""
-        self.params.vmax2[None] = 0
-        for i in range(self.state.n_spheres[None]):
-            ti.atomic_max(self.params.vmax2[None], self.state.v[i].norm_sqr())
-        for c in range(self.contacts.active.shape[0]):
-            self.contacts.active[c] = 0
-        self.contacts.n_active[None] = 0
-        self.contacts.n_touched[None] = 0

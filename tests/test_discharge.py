@@ -1,7 +1,8 @@
-"""Sinks taking spheres out in place (Performance.discharge_in_place, Engine.keep_spheres,
-contacts/warm_table.py): the remaining spheres' warm-start table moves down in the
-engine's fields, with the same bits as reading every table to the host, renumbering it
-(discharge.renumber_warm) and loading the scene again.
+"""Sinks taking spheres out in place (Performance.discharge_in_place): in the engine's
+fields (takeout.py, Engine.take_out), or with a recycling sink on the host with the
+remaining spheres' warm-start table moved down in the fields (Engine.keep_spheres,
+contacts/warm_table.py); the same bits as reading every table to the host,
+renumbering it (discharge.renumber_warm) and loading the scene again.
 """
 import dataclasses
 
@@ -171,15 +172,18 @@ def test_renumbered_warm_table_drops_the_partners_that_left():
     assert out["kept"].tolist() == [3, 0]
 
 
-def _gas_into_a_sink(n=40, seed=5):
+def _gas_into_a_sink(n=40, seed=5, lead=False):
     """n elastic spheres (radii 4-5 mm) without gravity, drifting towards +x with
-    random velocities into a sink at the far end: no contact solver."""
+    random velocities into a sink at the far end: no contact solver. ``lead``: sphere 0
+    is the largest (6 mm) and runs ahead, into the sink ~0.2 s before the others."""
     rng = np.random.default_rng(seed)
     g = np.arange(n)
     x = np.stack([0.02 + 0.012 * (g % 4), 0.02 + 0.012 * ((g // 4) % 5),
                   0.02 + 0.012 * (g // 20)], axis=1).astype(float)
     v = rng.normal(0.0, 0.05, (n, 3)) + np.array([0.4, 0.0, 0.0])
     radius = rng.uniform(0.004, 0.005, n)
+    if lead:
+        x[0], v[0], radius[0] = (0.125, 0.05, 0.03), (0.6, 0.0, 0.0), 0.006
     scene = ts.Scene.from_arrays(x, v, radius, box=((0, 0, 0), (0.2, 0.1, 0.06)),
                                  gravity=(0, 0, 0), restitution=1.0, wall_restitution=1.0,
                                  sinks=[ts.Sink((0.15, 0, 0), (0.2, 0.1, 0.06))])
@@ -226,3 +230,52 @@ def test_every_sphere_leaves_in_place(arch):
         totals.append({k: sim.stats[k] for k in ("steps", "discharged_mass",
                                                  "energy_discharged")})
     assert totals[0] == totals[1]
+
+
+def _scalars(sim) -> dict:
+    """The scalars an engine loads from the bound scene (state, contacts)."""
+    e = sim.debug_view().engine
+    names = {"state": ("r0", "m0", "inv_m0", "inv_i0"), "contacts": ("half_m0", "walk_reach")}
+    out = {f"{part}.{name}": getattr(getattr(e, part), name)[None]
+           for part, fields in names.items() for name in fields}
+    out["contacts.near_reach"] = e.contacts.near_reach
+    return out
+
+
+def test_take_out_loads_the_scalars_of_the_spheres_that_stay(arch):
+    """When the first and largest sphere leaves, the take-out in the fields loads the
+    scalars that follow from the first sphere's radius and mass and from the largest
+    radius as the host's reload does (both runs share one engine: read in turn)."""
+    if arch == "metal":
+        pytest.skip("no f64 on this arch")
+    scene = _gas_into_a_sink(lead=True)
+    seen = []
+    for in_place in (True, False):
+        sim = ts.Simulation(scene, arch=arch, precision="f64",
+                            tuning=Tuning().with_(discharge_in_place=in_place))
+        before = _scalars(sim)
+        sim.advance_to(0.1)
+        assert sim.stats["discharged"] == 1 and sim.sphere_ids[0] == 1
+        after = _scalars(sim)
+        assert after["state.r0"] != before["state.r0"]
+        assert after["contacts.walk_reach"] < before["contacts.walk_reach"]
+        seen.append(after)
+    assert seen[0] == seen[1]
+
+
+def test_an_emptied_simulation_restores_from_its_checkpoint(arch):
+    """A Simulation every sphere of which has left through the sinks checkpoints and
+    restores (into a new Simulation of the same scene), and goes on empty."""
+    if arch == "metal":
+        pytest.skip("no f64 on this arch")
+    scene = _gas_into_a_sink(n=8)
+    sim = ts.Simulation(scene, arch=arch, precision="f64")
+    sim.advance_to(0.6)
+    assert sim.n == 0
+    ckpt = sim.checkpoint()
+    other = ts.Simulation(scene, arch=arch, precision="f64")
+    other.restore(ckpt)
+    assert other.n == 0 and other.time == sim.time
+    assert other.stats["discharged"] == scene.n
+    other.advance(0.05)
+    assert other.state().x.shape == (0, 3)

@@ -72,12 +72,13 @@ def lammps_run(a, x, between=None):
     c = a.silo_radius + 0.005
     radius = np.full(len(x), a.radius)
     mass = 2500.0 * 4 / 3 * math.pi * radius ** 3
+    dt = 5e-6                                  # LAMMPS's step [s]
     lmp, _, _ = lammps_silo.open_silo(
         x, radius, mass, silo_radius=a.silo_radius, orifice_radius=a.orifice * a.radius,
         floor_z=0.05, top_z=0.05 + a.fill * 2.5, box_lo=(0, 0, 0),
         box_hi=(2 * c, 2 * c, 0.05 + a.fill * 2.5), e=0.5, mu=a.mu, mu_roll=0.0,
-        settle=a.settle, threads=1)
-    out = lammps_silo.discharge_loop(lmp, 5e-6, a.duration, a.sample, between)
+        dt=dt, settle=a.settle, threads=1)
+    out = lammps_silo.discharge_loop(lmp, dt, a.duration, a.sample, between)
     version = lammps_silo.lammps_version(lmp)
     lmp.close()
     return (np.asarray(out["times"]), np.asarray(out["discharged_mass"]), out["wall_s"],

@@ -55,7 +55,8 @@ def scenes(path: str) -> dict:
 
 def timed(scene, start: dict, interleave: int, window: float, repeat: int) -> dict:
     """Fastest wall s per simulated s of ``window`` s from checkpoint ``start``, rows and
-    sweeps per step, and the end state's digest, with solver_interleave k."""
+    sweeps per step, and the end state's digest, with k cells interleaved
+    (solver_interleave and frictional_interleave)."""
     sim = ts.Simulation(scene, threads=1, tuning=Tuning().with_(
         solver_interleave=interleave, frictional_interleave=interleave))
     sim.restore(start)
@@ -90,9 +91,10 @@ def parallel_bed(n_target: int, window: float, repeat: int) -> list:
     for threads in (1, 2):
         sims, times, digests = {}, {}, {}
         for k in (1, 8):
-            knob = "solver_interleave" if threads == 1 else "parallel_interleave"
+            knobs = (("solver_interleave", "frictional_interleave") if threads == 1
+                     else ("parallel_interleave",))
             sims[k] = ts.Simulation(scene, threads=threads, tuning=Tuning().with_(
-                serial_heavy_below=0, serial_solver_below=0, **{knob: k}))
+                serial_heavy_below=0, serial_solver_below=0, **{n: k for n in knobs}))
             sims[k].restore(start)
             untimed_pass(sims[k], lambda s: s.advance(window))
             times[k] = []

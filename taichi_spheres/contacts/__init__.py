@@ -226,6 +226,15 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
             self.near_allowance2[None] = allowance * allowance
         self.near_ready = False
 
+    @ti.func
+    def forget_pending(self):
+        """No cell owns a pending pair and no sphere is touched, as bind leaves them
+        (kernel top level)."""
+        for c in range(self.active.shape[0]):
+            self.active[c] = 0
+        self.n_active[None] = 0
+        self.n_touched[None] = 0
+
     # ---- the step's entry points ----
     def detect(self):
         """Full detection (fills ``active`` and params.remaining) on a freshly built
