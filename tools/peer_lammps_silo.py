@@ -32,7 +32,6 @@ import datetime
 import math
 import os
 import sys
-import time
 
 import numpy as np
 
@@ -61,9 +60,17 @@ def taichi_run(a, x):
     """(times, discharged mass, wall seconds, discharged count, spheres, largest overlap
     after a step / contact distance) of taichi_spheres."""
     settled = silo.settled_fill(a, a.fill, seed=1)
-    times, mass, seconds, sim = silo.discharge(a, settled, a.orifice * a.radius)
-    return (times, mass, seconds, int(sim.stats["discharged"]), len(settled[0]),
-            sim.stats["max_overlap"])
+    run = silo.TimedDischarge(a, settled, a.orifice * a.radius)
+    while run.chunk():
+        pass
+    return taichi_result(run, settled)
+
+
+def taichi_result(run, settled):
+    """taichi_run's tuple from a finished silo.TimedDischarge of the fill ``settled``."""
+    sim = run.sim
+    return (np.array(run.times), np.array(run.mass), run.wall, int(sim.stats["discharged"]),
+            len(settled[0]), sim.stats["max_overlap"])
 
 
 def lammps_run(a, x, between=None):
@@ -91,22 +98,11 @@ def interleaved_runs(a, x):
     so that both codes see the machine in the same state; each code's wall time counts
     its own chunks only."""
     settled = silo.settled_fill(a, a.fill, seed=1)
-    sim = silo.discharging(a, settled, a.orifice * a.radius)
-    sim.advance(a.sample)                      # compile outside the timed chunks
-    times, mass, wall = [sim.time], [sim.stats["discharged_mass"]], [0.0]
-
-    def taichi_chunk():
-        if sim.time < a.duration - 1e-12:
-            t0 = time.perf_counter()
-            sim.advance(a.sample)
-            wall[0] += time.perf_counter() - t0
-            times.append(sim.time)
-            mass.append(sim.stats["discharged_mass"])
-
-    lammps = lammps_run(a, x, taichi_chunk)
-    taichi = (np.array(times), np.array(mass), wall[0], int(sim.stats["discharged"]),
-              len(settled[0]), sim.stats["max_overlap"])
-    return taichi, lammps
+    run = silo.TimedDischarge(a, settled, a.orifice * a.radius)
+    lammps = lammps_run(a, x, run.chunk)
+    while run.chunk():                         # (none left: the same chunk count)
+        pass
+    return taichi_result(run, settled), lammps
 
 
 def main(argv=None):

@@ -128,18 +128,38 @@ def discharging(a, settled, hole):
     return sim
 
 
+class TimedDischarge:
+    """A discharge through an orifice of radius ``hole`` from the settled state, run in
+    timed chunks of a.sample s (``chunk``: one, until a.duration; the first, which
+    compiles, untimed), so that a caller can alternate them with another code's."""
+
+    def __init__(self, a, settled, hole):
+        self.a = a
+        self.sim = discharging(a, settled, hole)
+        self.sim.advance(a.sample)              # compile outside the timed chunks
+        self.times, self.mass = [self.sim.time], [self.sim.stats["discharged_mass"]]
+        self.wall = 0.0
+
+    def chunk(self) -> bool:
+        """Run the next chunk (timed) and sample; False when the discharge is over."""
+        if self.sim.time >= self.a.duration - 1e-12:
+            return False
+        t0 = time.perf_counter()
+        self.sim.advance(self.a.sample)
+        self.wall += time.perf_counter() - t0
+        self.times.append(self.sim.time)
+        self.mass.append(self.sim.stats["discharged_mass"])
+        return True
+
+
 def discharge(a, settled, hole):
     """Times [s], discharged mass [kg], wall seconds and the Simulation of a discharge
-    through an orifice of radius ``hole`` from the settled state."""
-    sim = discharging(a, settled, hole)
-    sim.advance(a.sample)                      # compile outside the timed loop
-    times, mass = [sim.time], [sim.stats["discharged_mass"]]
-    t0 = time.perf_counter()
-    while sim.time < a.duration - 1e-12:
-        sim.advance(a.sample)
-        times.append(sim.time)
-        mass.append(sim.stats["discharged_mass"])
-    return np.array(times), np.array(mass), time.perf_counter() - t0, sim
+    through an orifice of radius ``hole`` from the settled state (TimedDischarge's
+    chunks one after the other)."""
+    run = TimedDischarge(a, settled, hole)
+    while run.chunk():
+        pass
+    return np.array(run.times), np.array(run.mass), run.wall, run.sim
 
 
 def total_mass(a, n: int) -> float:
