@@ -15,6 +15,8 @@ import os
 import numpy as np
 import taichi as ti
 
+from . import frontend
+
 ARCHS = ("cpu", "gpu", "cuda", "vulkan", "metal")
 PRECISIONS = ("f32", "f64")
 
@@ -54,6 +56,9 @@ FAST_MATH = False
 #: default: its few threads fold a few copies, and its bits (tests/same_bits.json) stay
 #: as they are.
 GPU_THREAD_LOCAL = False
+#: "off" leaves Taichi's frontend without the source memos of frontend.py (for
+#: measuring them: tools/compile_frontend.py); anything else, or unset, installs them.
+FRONTEND_MEMO_ENV = "TAICHI_SPHERES_FRONTEND_MEMO"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -119,6 +124,8 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
     if arch == "metal" and want == "f64":
         raise ValueError("precision f64 is not available on Metal; use precision='f32'")
     kwargs = init_options(arch, want, mode, threads)
+    if os.environ.get(FRONTEND_MEMO_ENV, "").strip().lower() != "off":
+        frontend.memoize_source_lookups()
     with contextlib.redirect_stdout(io.StringIO()):
         ti.init(**kwargs)    # (its "[Taichi] Starting on arch=..." line: Runtime.actual says it)
     actual = ti.lang.impl.current_cfg().arch.name
