@@ -9,7 +9,7 @@ engine variant the test suite compiles), "warm" repeats the run on the cache the
 run filled. With the memos ("on") and without them (TAICHI_SPHERES_FRONTEND_MEMO=off),
 alternated, --repeat times; the median wall seconds of each, 1 thread.
 
-    python tools/compile_frontend.py                 # ~5 min
+    python tools/compile_frontend.py                 # ~20 min on 2 cores (optimized compiles ~1 min)
     python tools/compile_frontend.py --write         # the 'compile-frontend' section of docs/bench.md
 """
 from __future__ import annotations
@@ -81,7 +81,7 @@ def main(argv=None):
     p.add_argument("--scenes", nargs="+", default=list(SCENES))
     p.add_argument("--compile", nargs="+", default=["optimized", "fast"],
                    choices=["optimized", "fast"])
-    p.add_argument("--repeat", type=int, default=3)
+    p.add_argument("--repeat", type=int, default=1)
     p.add_argument("--write", action="store_true")
     a = p.parse_args(argv)
     t0 = time.perf_counter()
