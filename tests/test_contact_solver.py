@@ -364,15 +364,16 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     out, sweeps = [], []
     # (below, interleave, batch): both paths, then the interleaving and batching
     # variants where they meet something of their own (every variant on the plain FCC
-    # block; on the third colour and the capped solves one interleaving and one
-    # batching suffice, the bounded pass only the two paths' sums)
+    # block; on the third colour an interleaving of 3, whose last group of a colour is
+    # partial where 3 does not divide its cells, and a batch; the capped solves a
+    # batch; the bounded pass only the two paths' sums)
     configs = ((3000, 8, 1), (0, 8, 1))
     if case == "fcc block":
         configs += ((0, 8, 4), (3000, 1, 1), (0, 3, 1), (0, 1, 7))
     elif case.startswith("odd periodic"):
-        configs += ((0, 1, 7),)
-    elif "bounded" not in case:     # a batch of 4 does not divide the cap of 15
-        configs += ((0, 8, 4),)
+        configs += ((0, 3, 1), (0, 1, 7))
+    elif "bounded" not in case:
+        configs += ((0, 8, 4),)     # a batch of 4 does not divide the cap of 15
     for below, interleave, batch in configs:
         sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(
             serial_heavy_below=below, serial_solver_below=below, solver_interleave=interleave,
