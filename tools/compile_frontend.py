@@ -9,7 +9,7 @@ engine variant the test suite compiles), "warm" repeats the run on the cache the
 run filled. With the memos ("on") and without them (TAICHI_SPHERES_FRONTEND_MEMO=off),
 alternated, --repeat times; the median wall seconds of each, 1 thread.
 
-    python tools/compile_frontend.py                 # ~20 min on 2 cores (optimized compiles ~1 min)
+    python tools/compile_frontend.py                 # ~8 min on an idle 2-core machine
     python tools/compile_frontend.py --write         # the 'compile-frontend' section of docs/bench.md
 """
 from __future__ import annotations
