@@ -89,6 +89,11 @@ def default_precision(arch: str) -> str:
     return "f32" if arch in ("vulkan", "metal") else "f64"
 
 
+def frontend_memos_wanted() -> bool:
+    """Whether ensure installs frontend.py's memos: unless FRONTEND_MEMO_ENV is "off"."""
+    return os.environ.get(FRONTEND_MEMO_ENV, "").strip().lower() != "off"
+
+
 def compile_mode_from_env(default: str = "optimized") -> str:
     """The compile mode TAICHI_SPHERES_COMPILE asks for (``default`` when unset)."""
     mode = os.environ.get(COMPILE_ENV, "").strip().lower() or default
@@ -124,7 +129,7 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
     if arch == "metal" and want == "f64":
         raise ValueError("precision f64 is not available on Metal; use precision='f32'")
     kwargs = init_options(arch, want, mode, threads)
-    if os.environ.get(FRONTEND_MEMO_ENV, "").strip().lower() != "off":
+    if frontend_memos_wanted():
         frontend.memoize_source_lookups()
     with contextlib.redirect_stdout(io.StringIO()):
         ti.init(**kwargs)    # (its "[Taichi] Starting on arch=..." line: Runtime.actual says it)

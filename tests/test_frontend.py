@@ -1,7 +1,6 @@
 """The frontend memos (taichi_spheres/frontend.py): installed with the runtime, and
 they hand Taichi exactly what its own lookups give."""
 import importlib.util
-import os
 
 import numpy as np
 import pytest
@@ -12,7 +11,7 @@ from taichi_spheres import frontend, runtime
 def _installed(arch):
     """Start the runtime (which installs the memos) at the arch's default precision;
     skip where TAICHI_SPHERES_FRONTEND_MEMO turns them off."""
-    if os.environ.get(runtime.FRONTEND_MEMO_ENV, "").strip().lower() == "off":
+    if not runtime.frontend_memos_wanted():
         pytest.skip("the memos are turned off (TAICHI_SPHERES_FRONTEND_MEMO=off)")
     runtime.ensure(arch)
     assert frontend.installed()
