@@ -4,6 +4,9 @@
 TAICHI_SPHERES_FAILURE_LOG names a file that gets each failure's report at once;
 ``--compile`` how Taichi compiles (default fast: same bits, ~3x shorter compiles, which
 are most of the suite's time; see taichi_spheres/runtime.py COMPILE_MODES).
+Tests marked ``own_runtime`` initialise Taichi with settings of their own (thread
+counts, precision, compile mode) and run last: a test that does so unmarked makes the
+tests after it in its worker compile their engines again (docs/bench.md, "Test suite").
 Tolerances depend on precision: ``tol`` scales a relative tolerance by the machine
 epsilon of the precision under test.
 """
@@ -49,9 +52,11 @@ def _runs_f32(item) -> bool:
 
 
 def pytest_collection_modifyitems(config, items):
-    # f64 tests first, then f32: Taichi has one precision per process, so each switch
-    # re-initialises it and drops every compiled engine (taichi_spheres/engine.py)
-    items.sort(key=_runs_f32)
+    # f64 tests first, then f32, then those that initialise Taichi their own way
+    # (own_runtime: other thread counts, precision or compile mode): a process has one
+    # Taichi runtime, so each switch re-initialises it and drops every compiled engine
+    # (taichi_spheres/engine.py), and the tests after it would compile theirs again
+    items.sort(key=lambda item: ("own_runtime" in item.keywords, _runs_f32(item)))
     if config.getoption("--slow"):
         return
     skip = pytest.mark.skip(reason="slow validation run: use --slow")

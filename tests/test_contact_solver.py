@@ -335,10 +335,12 @@ def test_solver_conserves_momentum_without_walls(arch):
     assert np.allclose(p1, p0, rtol=0, atol=1e-14)
 
 
-@pytest.mark.parametrize("case", ["fcc block", "odd periodic colours, plain sweeps",
-                                  "fcc block, 15 sweeps",
-                                  "fcc block, 15 sweeps, bounded position pass",
-                                  "fcc block, 15 sweeps scaled with the step"])
+# the capped variants compile three engine variants more each: behind --slow
+@pytest.mark.parametrize("case", [
+    "fcc block", "odd periodic colours, plain sweeps",
+    pytest.param("fcc block, 15 sweeps", marks=pytest.mark.slow),
+    pytest.param("fcc block, 15 sweeps, bounded position pass", marks=pytest.mark.slow),
+    pytest.param("fcc block, 15 sweeps scaled with the step", marks=pytest.mark.slow)])
 def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     """The one-launch serial solver and the per-colour parallel launches (forced with
     serial_heavy_below = serial_solver_below = 0), each with one cell per sweep loop
@@ -547,8 +549,8 @@ def test_bounded_position_pass_keeps_the_overlaps_a_resting_scene_starts_with(ar
     assert np.abs(sim.state().x - x).max() <= 1e-6 * R
 
 
-@pytest.mark.parametrize("bounded, substeps", [("auto", False), ("off", False),
-                                               ("auto", True)])
+@pytest.mark.parametrize("bounded, substeps", [
+    pytest.param("auto", False, marks=pytest.mark.slow), ("off", False), ("auto", True)])
 def test_bounded_warm_start_adds_no_energy_after_a_heavy_impact(arch, bounded, substeps):
     """The heavy ball of the test above, solved with few over-relaxed sweeps (relaxation
     1.8, 40 velocity and 40 position sweeps), where the step after the impact starts

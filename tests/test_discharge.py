@@ -72,7 +72,8 @@ def _same_bits_both_ways(arch, precision, case):
 
 
 @pytest.mark.parametrize("case", [
-    dict(materials=True), dict(recycle=True), dict(substeps=False)])
+    dict(materials=True), pytest.param(dict(recycle=True), marks=pytest.mark.slow),
+    pytest.param(dict(substeps=False), marks=pytest.mark.slow)])
 def test_discharge_in_place_keeps_the_bits_of_a_reload(arch, case):
     """A discharging silo (polydisperse, frictional; with two materials, one with
     rolling friction; a recycling sink; or without substeps) gives the same positions,
@@ -83,6 +84,7 @@ def test_discharge_in_place_keeps_the_bits_of_a_reload(arch, case):
     _same_bits_both_ways(arch, "f64", case)
 
 
+@pytest.mark.own_runtime
 def test_discharge_in_place_keeps_the_bits_of_a_reload_in_f32(arch):
     """The same in f32, where the host's copies pass through float64."""
     _same_bits_both_ways(arch, "f32", {})

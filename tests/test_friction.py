@@ -234,6 +234,7 @@ def test_frictional_pile_energy_is_booked_and_settles(arch, mu_r):
         assert np.abs(st.omega * st.radius[:, None]).max() < 1e-6
 
 
+@pytest.mark.own_runtime
 def test_friction_same_bits_for_any_thread_count(arch):
     """The frictional solve gives the same bits on 1 and 2 threads, and with one cell
     per sweep loop iteration or several interleaved (Performance.solver_interleave)

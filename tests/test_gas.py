@@ -76,6 +76,7 @@ def test_same_scene_gives_identical_bits(arch):
     assert_same_counters(runs[0][2], runs[1][2], sim)
 
 
+@pytest.mark.own_runtime
 def test_bits_do_not_depend_on_thread_count(arch):
     if arch != "cpu":
         pytest.skip("thread count is a CPU setting")
@@ -169,6 +170,7 @@ def test_compiled_in_restitution_with_e_1_stays_elastic(arch):
     assert abs(ts.observe.kinetic_energy(sim.state()) / e0 - 1) < tol(precision, 1e4)
 
 
+@pytest.mark.own_runtime
 def test_stale_simulation_refuses_to_run(arch):
     sim = ts.Simulation(gas(50, periodic=True), arch=arch, precision="f64")
     ts.Simulation(gas(50, periodic=True), arch=arch, precision="f32")   # re-initialises
@@ -176,6 +178,7 @@ def test_stale_simulation_refuses_to_run(arch):
         sim.advance(0.1)
 
 
+@pytest.mark.own_runtime
 def test_compile_modes_give_the_same_bits(arch):
     """runtime.COMPILE_MODES change how long kernels take to compile and run, never the
     results: the same-bits reference scene (inelastic, walls, gravity, unequal radii
@@ -231,6 +234,7 @@ def test_loop_probe_passes_on_this_arch(arch):
     assert runtime.probe_loops() == (outer * rows * per_row, outer * rows * per_row)
 
 
+@pytest.mark.own_runtime
 def test_a_driver_failing_the_loop_probe_is_refused(arch):
     """A backend that drops visits in the probe (as Mesa's lavapipe 22 does) gets a
     RuntimeError that says what is wrong and what to use instead, not a simulation

@@ -181,6 +181,7 @@ def test_two_material_pile_settles_with_its_energy_booked(arch):
     assert sim.last_step["max_overlap"] < 1e-5
 
 
+@pytest.mark.own_runtime
 def test_two_material_pile_same_bits_for_any_thread_count(arch):
     if arch != "cpu":
         pytest.skip("thread counts are a CPU setting")

@@ -36,6 +36,7 @@ def test_grid_runs_every_combination_and_names_bad_keys():
         ts.sweep(small_gas(), {"restitutoin": [0.5]}, duration=0.1, serial=True)
 
 
+@pytest.mark.own_runtime
 def test_serial_sweep_reports_failures_in_their_rows(tmp_path):
     seen = []
     rows = ts.sweep(small_gas(), GRID, duration=0.1, serial=True, out=tmp_path / "s.csv",
@@ -52,6 +53,7 @@ def test_serial_sweep_reports_failures_in_their_rows(tmp_path):
     assert table[2]["error"].startswith("ValueError") and table[2]["steps"] == ""
 
 
+@pytest.mark.own_runtime
 def test_local_cluster_of_two_processes_gives_the_serial_rows():
     pytest.importorskip("distributed")
     grid = {"restitution": [1.0, 0.8], "step_fraction": [0.1, 0.05]}
