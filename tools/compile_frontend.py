@@ -26,7 +26,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.join(HERE, "..")
 sys.path.insert(0, HERE)
 
-from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
+from machine import cpu_name, kernel_cache_env, publish  # noqa: E402  (tools/machine.py)
 
 SCENES = ("scenes/pour.toml", "scenes/silo.toml")
 CHILD = """
@@ -50,9 +50,8 @@ def first_run(scene: str, mode: str, memo: bool, cache: str) -> tuple:
     ``mode``, the memos on or off) with Taichi's offline cache in directory ``cache``,
     and of the first step of a second engine variant in that process (another sweep
     cap: the same kernels, compiled again)."""
-    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=cache,
-               TAICHI_SPHERES_FRONTEND_MEMO="on" if memo else "off",
-               TAICHI_SPHERES_COMPILE=mode)
+    env = kernel_cache_env(cache, TAICHI_SPHERES_FRONTEND_MEMO="on" if memo else "off",
+                           TAICHI_SPHERES_COMPILE=mode)
     code = CHILD.format(root=ROOT, scene=os.path.join(ROOT, scene))
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                          text=True, check=True)

@@ -32,7 +32,7 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.join(HERE, "..")
 sys.path.insert(0, HERE)
-from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
+from machine import cpu_name, kernel_cache_env, publish  # noqa: E402  (tools/machine.py)
 
 
 def _scene(n, seed):
@@ -73,7 +73,7 @@ def child(mode: str, n: int, n2: int, window: float) -> dict:
 
 
 def run_child(mode, n, n2, window, cache_dir) -> dict:
-    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=cache_dir)
+    env = kernel_cache_env(cache_dir)
     out = subprocess.run([sys.executable, __file__, "--child", mode, "--n", str(n),
                           "--n2", str(n2), "--window", str(window)],
                          env=env, capture_output=True, text=True, check=True)

@@ -35,7 +35,11 @@ import sys
 import tempfile
 import time
 
-ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.join(HERE, "..")
+sys.path.insert(0, HERE)
+from machine import kernel_cache_env  # noqa: E402  (tools/machine.py)
+
 MODES = ("optimized", "fast")
 
 
@@ -112,7 +116,7 @@ def step_child(mode: str, n: int, core: int, go: float, window: float) -> dict:
 
 
 def _spawn(args, cache):
-    env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=cache)
+    env = kernel_cache_env(cache)
     return subprocess.Popen([sys.executable, __file__] + args, env=env, text=True,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 

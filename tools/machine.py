@@ -1,6 +1,18 @@
-"""What machine a tools/ script ran on, for the reports it writes."""
+"""What machine a tools/ script ran on, for the reports it writes; the environment of
+the child processes that time compiles."""
+import os
 import platform
 import subprocess
+
+#: the environment variable that names Taichi's offline kernel cache directory
+KERNEL_CACHE_ENV = "TI_OFFLINE_CACHE_FILE_PATH"
+
+
+def kernel_cache_env(cache: str, **extra: str) -> dict:
+    """This process's environment for a child process whose Taichi keeps its compiled
+    kernels in directory ``cache`` (an empty one: every kernel compiles, as on a fresh
+    machine or in CI), with the variables ``extra`` set too."""
+    return dict(os.environ, **{KERNEL_CACHE_ENV: cache}, **extra)
 
 
 def untimed_pass(sim, run) -> None:

@@ -21,14 +21,14 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.join(HERE, "..")
 sys.path.insert(0, HERE)
-from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
+from machine import cpu_name, kernel_cache_env, publish  # noqa: E402  (tools/machine.py)
 
 
 def run_suite() -> tuple:
     """(pytest's summary line, wall seconds, exit code) of ``make test``; pytest's
     FAILED and ERROR lines go to stderr."""
     with tempfile.TemporaryDirectory() as cache:
-        env = dict(os.environ, TI_OFFLINE_CACHE_FILE_PATH=cache)
+        env = kernel_cache_env(cache)
         t0 = time.perf_counter()
         out = subprocess.run(["make", "test"], cwd=ROOT, env=env, capture_output=True,
                              text=True)
