@@ -145,6 +145,10 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
         # instead of a launch plus two scalar reads per sweep
 
         @ti.kernel
+        def forget():
+            self.forget_pending()
+
+        @ti.kernel
         def detect_all() -> ti.i32:
             self._detect_all_body()
             return self.status()
@@ -188,6 +192,7 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
             return self.status()
 
 
+        self.forget = forget
         self.detect_all = detect_all
         self.detect_near = detect_near if self.near_lists else None
         self.bucket_parallel = bucket_parallel
@@ -200,9 +205,7 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
         """Load what the kernels read of a scene and its grid geometry ``geom`` (after
         state.bind and grid.bind); forget the near lists and any pending pairs."""
         self.bind_scalars(scene, geom)
-        self.active.fill(0)
-        self.n_active[None] = 0
-        self.n_touched[None] = 0
+        self.forget()
 
     def bind_scalars(self, scene, geom):
         """bind's values that follow from the scene and ``geom``: the sphere count,
@@ -228,8 +231,8 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
 
     @ti.func
     def forget_pending(self):
-        """No cell owns a pending pair and no sphere is touched, as bind leaves them
-        (kernel top level)."""
+        """No cell owns a pending pair and no sphere is touched (kernel top level): what
+        bind (through the kernel ``forget``) and the take-out (takeout.py) leave."""
         for c in range(self.active.shape[0]):
             self.active[c] = 0
         self.n_active[None] = 0

@@ -22,6 +22,31 @@ from .sweeps import MAX_COLOURS
 WARM, VELOCITY, POSITION = 0, 1, 2
 
 
+@ti.pyfunc
+def plain_sweep(it, relaxed, cap, last):
+    """1 where sweep ``it`` (from 0) of a solve capped at ``cap`` sweeps runs plain
+    (omega = 1): the solve is no longer ``relaxed``, or the sweep is among the ``last``
+    of the cap (set_cap); else 0 (over-relaxed). Called in kernels (sweep_relaxation)
+    and by the host's loop of one launch per sweep (ContactSolver._iterate): one rule."""
+    return 1 if (relaxed == 0 or it >= cap - last) else 0
+
+
+@ti.pyfunc
+def next_sweep(it, relaxed, plain, cap, within):
+    """(it, relaxed, done) once sweep ``it`` ran: ``within`` (1 where it left every
+    row within tolerance) ends the over-relaxation, and the solve after a plain sweep;
+    the cap ends it too. Kernels (after_sweep) and the host's loop alike."""
+    it += 1
+    done = 0
+    if within != 0:
+        relaxed = 0
+        if plain != 0:
+            done = 1
+    if it >= cap:
+        done = 1
+    return it, relaxed, done
+
+
 class GaussSeidel:
     """Row updates, sweeps over one colour's cells, and whole serial iterations."""
 
@@ -219,7 +244,7 @@ class GaussSeidel:
         """(omega, plain) of sweep ``it`` (from 0) of a solve capped at ``cap`` sweeps:
         over-relaxed while ``relaxed`` and not among the ``last`` sweeps of the cap
         (set_cap), else plain (omega = 1; plain = 1)."""
-        plain = 1 if (relaxed == 0 or it >= cap - last) else 0
+        plain = plain_sweep(it, relaxed, cap, last)
         omega = ti.cast(1, self.real)
         if plain == 0:
             omega = ti.cast(ti.static(self.rules.relaxation), self.real)
@@ -227,18 +252,12 @@ class GaussSeidel:
 
     @ti.func
     def after_sweep(self, it, relaxed, plain, cap, tol):
-        """(it, relaxed, done) once sweep ``it`` left ``residual``: a residual within
-        ``tol`` [m/s] ends the over-relaxation, and the solve after a plain sweep; the
-        cap ends it too."""
-        it += 1
-        done = 0
-        if not self.residual[None] > tol:
-            relaxed = 0
-            if plain != 0:
-                done = 1
-        if it >= cap:
-            done = 1
-        return it, relaxed, done
+        """(it, relaxed, done) once sweep ``it`` left ``residual`` (next_sweep; within
+        tolerance: not above ``tol`` [m/s])."""
+        within = 1
+        if self.residual[None] > tol:
+            within = 0
+        return next_sweep(it, relaxed, plain, cap, within)
 
     @ti.func
     def iterate_serially(self, mode: ti.template(), caps: ti.template(), last: ti.template(),

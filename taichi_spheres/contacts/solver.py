@@ -59,7 +59,7 @@ from ..params import StepParams
 from ..state import Features, SphereState
 from .friction_rows import FrictionRows
 from .overlaps import OverlapMeasure
-from .pgs import POSITION, VELOCITY, WARM, GaussSeidel
+from .pgs import POSITION, VELOCITY, WARM, GaussSeidel, next_sweep, plain_sweep
 from .rows import ContactRows
 from .shock import ShockPropagation, shock_compiled
 from .sweeps import MAX_COLOURS
@@ -541,14 +541,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
                     return ran
         limit, cap, plain_sweeps = tol[None], caps[None], last[None]
         sweep = self._sweep(mode)
-        relaxed = self.rules.relaxation != 1
-        it = 0
-        while it < cap:
-            plain = not relaxed or it >= cap - plain_sweeps
+        it, relaxed, done = 0, int(self.rules.relaxation != 1), 0
+        while done == 0:      # iterate_serially's loop (pgs.plain_sweep, pgs.next_sweep)
+            plain = plain_sweep(it, relaxed, cap, plain_sweeps)
             residual = sweep(1.0 if plain else self.rules.relaxation)
-            it += 1
-            if not residual > limit:
-                if plain:
-                    break
-                relaxed = False
+            it, relaxed, done = next_sweep(it, relaxed, plain, cap, int(not residual > limit))
         return it
