@@ -277,16 +277,24 @@ class Tuning:
                       performance=dataclasses.replace(self.performance, **groups["performance"]))
 
     def compiled(self) -> "Tuning":
-        """This Tuning with the options no kernel reads (HOST_ONLY) at their defaults:
-        what an engine's kernels compile in (engine.EngineKey), so that Simulations
-        differing only in those share compiled engines."""
-        return dataclasses.replace(self, performance=dataclasses.replace(
-            self.performance, **{name: getattr(Performance(), name) for name in HOST_ONLY}))
+        """This Tuning with the options no kernel compiles in (HOST_ONLY, SOLVER_VALUES)
+        at their defaults: what an engine's kernels compile in (engine.EngineKey), so
+        that Simulations differing only in those share compiled engines."""
+        return Tuning(
+            physics=dataclasses.replace(
+                self.physics, **{name: getattr(Rules(), name) for name in SOLVER_VALUES}),
+            performance=dataclasses.replace(
+                self.performance, **{name: getattr(Performance(), name) for name in HOST_ONLY}))
 
 
 #: Performance options that only the host reads (Simulation): they do not enter the
 #: compiled engines' key (Tuning.compiled)
 HOST_ONLY = ("discharge_in_place",)
+#: Rules the contact solver's kernels read as values in fields, loaded when a
+#: Simulation binds its engine (contacts/solver.py ContactSolver.load_sweep_rules):
+#: Simulations that differ only in these share compiled engines
+SOLVER_VALUES = ("relaxation", "contact_iterations", "position_iterations", "plain_sweeps",
+                 "min_scaled_sweeps")
 
 
 def field_types() -> dict:

@@ -170,7 +170,7 @@ class Engine:
         self.grid.bind(geom)
         self.contacts.bind(scene, geom)
         if self.solver is not None:
-            self.solver.bind(scene, geom, reach)
+            self.solver.bind(scene, geom, reach, sim.tuning.physics)
             if warm is not None:
                 self.solver.load_warm(warm)
         self._occupant = weakref.ref(sim)

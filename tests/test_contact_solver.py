@@ -335,6 +335,39 @@ def test_solver_conserves_momentum_without_walls(arch):
     assert np.allclose(p1, p0, rtol=0, atol=1e-14)
 
 
+def test_sweep_rules_share_the_engine_and_keep_their_bits(arch):
+    """The sweep rules (config.SOLVER_VALUES: relaxation, sweep caps, plain sweeps,
+    fewest scaled sweeps) are values the kernels read from fields: Simulations that
+    differ only in them run on one engine, each under its own rules (a cap of 3
+    velocity sweeps holds where the defaults run more), with the bits each gives alone,
+    whichever ran in between."""
+    capped = Tuning().with_(relaxation=1.0, contact_iterations=3, position_iterations=2,
+                            plain_sweeps=1, min_scaled_sweeps=1)
+    assert capped.compiled() == Tuning().compiled()
+    scene = fcc_block(3)
+
+    def run(sims):
+        """Digests after 8 chunks of 0.025 s, the Simulations alternated chunk by chunk
+        (each bind loads its own rules), and the most velocity sweeps of a step of the
+        first."""
+        most = 0
+        for _ in range(8):
+            for sim in sims:
+                sim.advance(0.025)
+            most = max(most, sims[0].last_step["contact_iterations"])
+        return [observe.state_digest(sim.state(), sim.precision) for sim in sims], most
+
+    alone_capped = ts.Simulation(scene, arch=arch, tuning=capped)
+    alone_default = ts.Simulation(scene, arch=arch)
+    assert alone_capped.debug_view().engine is alone_default.debug_view().engine
+    (capped_bits,), most_capped = run([alone_capped])
+    (default_bits,), most_default = run([alone_default])
+    together, _ = run([ts.Simulation(scene, arch=arch, tuning=capped),
+                       ts.Simulation(scene, arch=arch)])
+    assert together == [capped_bits, default_bits] and capped_bits != default_bits
+    assert 0 < most_capped <= 3 < most_default
+
+
 # the capped variants compile three engine variants more each: behind --slow
 @pytest.mark.parametrize("case", [
     "fcc block", "odd periodic colours, plain sweeps",

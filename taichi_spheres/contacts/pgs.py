@@ -205,11 +205,11 @@ class GaussSeidel:
         level)."""
         self.tol_v[None] = ti.static(self.rules.contact_tolerance) * self.impact_speed()
         self.tol_w[None] = self.tol_len[None] / self.params.h[None]
-        self.set_cap(self.cap_v, self.plain_v, ti.static(self.rules.contact_iterations))
-        self.set_cap(self.cap_w, self.plain_w, ti.static(self.rules.position_iterations))
+        self.set_cap(self.cap_v, self.plain_v, self.full_v[None])
+        self.set_cap(self.cap_w, self.plain_w, self.full_w[None])
 
     @ti.func
-    def set_cap(self, cap: ti.template(), plain: ti.template(), full: ti.template()):
+    def set_cap(self, cap: ti.template(), plain: ti.template(), full):
         """This step's sweep cap and plain sweeps of a solve capped at ``full`` sweeps:
         ``full`` and Rules.plain_sweeps, or with Rules.step_scaled_sweeps both scaled by
         the step's length over a quiet bed's step h_q = (contact_margin - 1) D /
@@ -221,17 +221,17 @@ class GaussSeidel:
         cold solve (the first of a Simulation, no has_last_step; or Rules.warm_start off) has
         no last step to start from and keeps the full caps."""
         cap[None] = full
-        plain[None] = self.rules.plain_sweeps
+        plain[None] = self.plain_sweeps[None]
         if ti.static(self.rules.step_scaled_sweeps and self.rules.warm_start):
             share = ti.cast(1, self.real)      # quiet_len 0 (unknown), or cold: full caps
             if self.quiet_len[None] > 0 and self.has_last_step():
                 share = ti.min(self.params.h[None] * self.impact_speed() /
                                self.quiet_len[None], 1)
-            low = min(self.rules.min_scaled_sweeps, full)
+            low = ti.min(self.min_scaled[None], full)
             n = ti.min(ti.max(ti.cast(ti.ceil(full * share), ti.i32), low), full)
             cap[None] = n
-            if ti.static(self.rules.plain_sweeps > 0):
-                plain[None] = ti.max(1, (self.rules.plain_sweeps * n + full - 1) // full)
+            if self.plain_sweeps[None] > 0:
+                plain[None] = ti.max(1, (self.plain_sweeps[None] * n + full - 1) // full)
 
     @ti.func
     def warm_start_serially(self):
@@ -247,7 +247,7 @@ class GaussSeidel:
         plain = plain_sweep(it, relaxed, cap, last)
         omega = ti.cast(1, self.real)
         if plain == 0:
-            omega = ti.cast(ti.static(self.rules.relaxation), self.real)
+            omega = self.omega_relax[None]
         return omega, plain
 
     @ti.func
@@ -267,7 +267,7 @@ class GaussSeidel:
         (set_cap); returns the sweeps run."""
         it = 0
         cap = caps[None]
-        relaxed = 1 if ti.static(self.rules.relaxation != 1) else 0
+        relaxed = 1 if self.omega_relax[None] != 1 else 0
         done = 0
         while done == 0:
             omega, plain = self.sweep_relaxation(it, relaxed, cap, last[None])
@@ -286,7 +286,7 @@ class GaussSeidel:
         for _ in range(1):
             if first != 0:
                 self.batch_it[None] = 0
-                self.batch_relaxed[None] = 1 if ti.static(self.rules.relaxation != 1) else 0
+                self.batch_relaxed[None] = 1 if self.omega_relax[None] != 1 else 0
                 self.batch_done[None] = 0
             if self.batch_done[None] == 0:
                 omega, plain = self.sweep_relaxation(

@@ -148,6 +148,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         # position_energy.py: the position pass lifts no more than the step dissipated
         self.bounded_position_pass = self.rules.bounded_position_pass and features.gravity
         self._allocate(state.capacity, grid.cell_capacity)
+        self.load_sweep_rules(self.rules)      # (each bind loads its Simulation's)
         self._build_kernels()
 
     def _allocate(self, cap: int, cells: int):
@@ -215,6 +216,14 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.plain_v = ti.field(ti.i32, shape=())
         self.plain_w = ti.field(ti.i32, shape=())
         self.quiet_len = ti.field(self.real, shape=())    # (contact_margin - 1) D [m] (bind)
+        # the bound Simulation's sweep rules (config.SOLVER_VALUES: load_sweep_rules):
+        # relaxation omega, velocity and position sweep caps, plain sweeps, fewest
+        # scaled sweeps
+        self.omega_relax = ti.field(self.real, shape=())
+        self.full_v = ti.field(ti.i32, shape=())
+        self.full_w = ti.field(ti.i32, shape=())
+        self.plain_sweeps = ti.field(ti.i32, shape=())
+        self.min_scaled = ti.field(ti.i32, shape=())
         # a batched solve (pgs.batched_sweep): its sweeps so far,
         # over-relaxing still, done; this sweep's omega and plainness
         self.batch_it = ti.field(ti.i32, shape=())
@@ -223,14 +232,27 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.batch_plain = ti.field(ti.i32, shape=())
         self.batch_omega = ti.field(self.real, shape=())
 
-    def bind(self, scene, geom, reach=None):
+    def bind(self, scene, geom, reach=None, rules=None):
         """Load a scene's grid geometry ``geom`` (colours; the speculative margin: the
-        grid's slack, or ``reach`` [m] if smaller) and forget the warm start."""
+        grid's slack, or ``reach`` [m] if smaller) and the Simulation's sweep ``rules``
+        (config.Rules; None: the engine's), and forget the warm start."""
         self.bind_scalars(scene, geom, reach)
+        self.load_sweep_rules(self.rules if rules is None else rules)
         self.h_prev[None] = 0
         self.warm_n.fill(0)
         self.state.loaded.fill(0)
         self.state.near.fill(0)
+
+    def load_sweep_rules(self, rules) -> None:
+        """The sweep rules (config.SOLVER_VALUES) of ``rules`` (config.Rules), which the
+        kernels read from fields: relaxation, sweep caps, plain sweeps, fewest scaled
+        sweeps (pgs.set_cap, pgs.sweep_relaxation)."""
+        self.relaxation = rules.relaxation
+        self.omega_relax[None] = rules.relaxation
+        self.full_v[None] = rules.contact_iterations
+        self.full_w[None] = rules.position_iterations
+        self.plain_sweeps[None] = rules.plain_sweeps
+        self.min_scaled[None] = rules.min_scaled_sweeps
 
     def bind_scalars(self, scene, geom, reach=None):
         """bind's values that follow from the scene and ``geom``: colours, tolerances,
@@ -541,9 +563,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
                     return ran
         limit, cap, plain_sweeps = tol[None], caps[None], last[None]
         sweep = self._sweep(mode)
-        it, relaxed, done = 0, int(self.rules.relaxation != 1), 0
+        it, relaxed, done = 0, int(self.relaxation != 1), 0
         while done == 0:      # iterate_serially's loop (pgs.plain_sweep, pgs.next_sweep)
             plain = plain_sweep(it, relaxed, cap, plain_sweeps)
-            residual = sweep(1.0 if plain else self.rules.relaxation)
+            residual = sweep(1.0 if plain else self.relaxation)
             it, relaxed, done = next_sweep(it, relaxed, plain, cap, int(not residual > limit))
         return it
