@@ -5,7 +5,8 @@ fields (state, parameters, grid, contacts, projection) with the kernels over the
 scene's numbers (sphere count, box, cell layout, radii, masses, restitution, gravity)
 are data in those fields, and only what changes the code is compiled in: the
 features (``state.Features``), the serial/parallel loop variants chosen by the
-sphere count, near lists, and the options (``config.Tuning``). A Simulation asks the
+sphere count, near lists, and the options (``config.Tuning.compiled``: less those only
+the host reads and the contact solver's sweep rules, which are data too). A Simulation asks the
 pool for an engine with its key and room for its spheres and cells; a later
 Simulation with the same key and no more spheres or cells runs on the same engine
 and compiles nothing (``tools/compile_once.py`` measures it).
@@ -88,7 +89,7 @@ class EngineKey:
     (runtime.Runtime.generation: arch, precision, threads, compile mode), the scene's
     features, the loop variants (serial_light: cheap loops serial; serial_heavy:
     detection and sweeps serial; serial_few: a serial sweep variant for few pairs),
-    near lists, and the options (config.Tuning)."""
+    near lists, and the options (config.Tuning.compiled)."""
 
     generation: int
     real: object

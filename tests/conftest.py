@@ -56,7 +56,8 @@ def pytest_collection_modifyitems(config, items):
     # (own_runtime: other thread counts, precision or compile mode): a process has one
     # Taichi runtime, so each switch re-initialises it and drops every compiled engine
     # (taichi_spheres/engine.py), and the tests after it would compile theirs again
-    items.sort(key=lambda item: ("own_runtime" in item.keywords, _runs_f32(item)))
+    items.sort(key=lambda item: (item.get_closest_marker("own_runtime") is not None,
+                                 _runs_f32(item)))
     if config.getoption("--slow"):
         return
     skip = pytest.mark.skip(reason="slow validation run: use --slow")

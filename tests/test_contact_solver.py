@@ -335,7 +335,7 @@ def test_solver_conserves_momentum_without_walls(arch):
     assert np.allclose(p1, p0, rtol=0, atol=1e-14)
 
 
-def test_sweep_rules_share_the_engine_and_keep_their_bits(arch):
+def test_sweep_rules_share_the_engine_and_keep_their_bits(arch, precision):
     """The sweep rules (config.SOLVER_VALUES: relaxation, sweep caps, plain sweeps,
     fewest scaled sweeps) are values the kernels read from fields: Simulations that
     differ only in them run on one engine, each under its own rules (a cap of 3
@@ -357,23 +357,23 @@ def test_sweep_rules_share_the_engine_and_keep_their_bits(arch):
             most = max(most, sims[0].last_step["contact_iterations"])
         return [observe.state_digest(sim.state(), sim.precision) for sim in sims], most
 
-    alone_capped = ts.Simulation(scene, arch=arch, tuning=capped)
-    alone_default = ts.Simulation(scene, arch=arch)
+    alone_capped = ts.Simulation(scene, arch=arch, precision=precision, tuning=capped)
+    alone_default = ts.Simulation(scene, arch=arch, precision=precision)
     assert alone_capped.debug_view().engine is alone_default.debug_view().engine
     (capped_bits,), most_capped = run([alone_capped])
     (default_bits,), most_default = run([alone_default])
-    together, _ = run([ts.Simulation(scene, arch=arch, tuning=capped),
-                       ts.Simulation(scene, arch=arch)])
+    together, _ = run([ts.Simulation(scene, arch=arch, precision=precision, tuning=capped),
+                       ts.Simulation(scene, arch=arch, precision=precision)])
     assert together == [capped_bits, default_bits] and capped_bits != default_bits
     assert 0 < most_capped <= 3 < most_default
 
 
-# the capped variants compile three engine variants more each: behind --slow
+# the bounded position pass compiles engine variants of its own: behind --slow (the
+# capped and scaled cases run on the plain case's engines: the caps are field values)
 @pytest.mark.parametrize("case", [
-    "fcc block", "odd periodic colours, plain sweeps",
-    pytest.param("fcc block, 15 sweeps", marks=pytest.mark.slow),
+    "fcc block", "odd periodic colours, plain sweeps", "fcc block, 15 sweeps",
     pytest.param("fcc block, 15 sweeps, bounded position pass", marks=pytest.mark.slow),
-    pytest.param("fcc block, 15 sweeps scaled with the step", marks=pytest.mark.slow)])
+    "fcc block, 15 sweeps scaled with the step"])
 def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     """The one-launch serial solver and the per-colour parallel launches (forced with
     serial_heavy_below = serial_solver_below = 0), each with one cell per sweep loop

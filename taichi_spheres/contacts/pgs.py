@@ -267,7 +267,7 @@ class GaussSeidel:
         (set_cap); returns the sweeps run."""
         it = 0
         cap = caps[None]
-        relaxed = 1 if self.omega_relax[None] != 1 else 0
+        relaxed = self.relax_on[None]
         done = 0
         while done == 0:
             omega, plain = self.sweep_relaxation(it, relaxed, cap, last[None])
@@ -286,7 +286,7 @@ class GaussSeidel:
         for _ in range(1):
             if first != 0:
                 self.batch_it[None] = 0
-                self.batch_relaxed[None] = 1 if self.omega_relax[None] != 1 else 0
+                self.batch_relaxed[None] = self.relax_on[None]
                 self.batch_done[None] = 0
             if self.batch_done[None] == 0:
                 omega, plain = self.sweep_relaxation(

@@ -220,6 +220,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         # relaxation omega, velocity and position sweep caps, plain sweeps, fewest
         # scaled sweeps
         self.omega_relax = ti.field(self.real, shape=())
+        self.relax_on = ti.field(ti.i32, shape=())     # 1 where relaxation != 1
         self.full_v = ti.field(ti.i32, shape=())
         self.full_w = ti.field(ti.i32, shape=())
         self.plain_sweeps = ti.field(ti.i32, shape=())
@@ -232,12 +233,13 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.batch_plain = ti.field(ti.i32, shape=())
         self.batch_omega = ti.field(self.real, shape=())
 
-    def bind(self, scene, geom, reach=None, rules=None):
+    def bind(self, scene, geom, reach, rules):
         """Load a scene's grid geometry ``geom`` (colours; the speculative margin: the
-        grid's slack, or ``reach`` [m] if smaller) and the Simulation's sweep ``rules``
-        (config.Rules; None: the engine's), and forget the warm start."""
+        grid's slack, or ``reach`` [m] if smaller; None: the slack) and the
+        Simulation's sweep ``rules`` (config.Rules: the engine's own hold the defaults
+        of config.SOLVER_VALUES), and forget the warm start."""
         self.bind_scalars(scene, geom, reach)
-        self.load_sweep_rules(self.rules if rules is None else rules)
+        self.load_sweep_rules(rules)
         self.h_prev[None] = 0
         self.warm_n.fill(0)
         self.state.loaded.fill(0)
@@ -249,6 +251,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         sweeps (pgs.set_cap, pgs.sweep_relaxation)."""
         self.relaxation = rules.relaxation
         self.omega_relax[None] = rules.relaxation
+        # (decided on the double, as the host's loop decides it, not on a rounded f32)
+        self.relax_on[None] = int(rules.relaxation != 1)
         self.full_v[None] = rules.contact_iterations
         self.full_w[None] = rules.position_iterations
         self.plain_sweeps[None] = rules.plain_sweeps
