@@ -47,6 +47,7 @@ sys.path.insert(0, HERE)
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import Rules  # noqa: E402
+from taichi_spheres.contacts.pgs import next_sweep, plain_sweep  # noqa: E402
 from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
 from solver_convergence import Problem, capture, update_row  # noqa: E402
 
@@ -70,10 +71,11 @@ def replay(prob: Problem, rules: Rules, tol: float, skip: str = "none",
     small = threshold * tol if skip == "threshold" else 0.0
     stamp = [-1] * len(vl)          # update count at a sphere's last (large) change
     seen = [-2] * len(lam)          # update count at a row's last idle update
-    clock, updates, skipped, it = 0, 0, 0, 0
-    relaxed = rules.relaxation != 1
-    while it < rules.contact_iterations:
-        plain = not relaxed or it >= rules.contact_iterations - rules.plain_sweeps
+    clock, updates, skipped = 0, 0, 0
+    cap = rules.contact_iterations
+    it, relaxed, done = 0, int(rules.relaxation != 1), 0
+    while done == 0:        # the engine's rule (taichi_spheres/contacts/pgs.py)
+        plain = plain_sweep(it, relaxed, cap, rules.plain_sweeps)
         omega = 1.0 if plain else rules.relaxation
         residual = 0.0
         for s in order:
@@ -93,11 +95,7 @@ def replay(prob: Problem, rules: Rules, tol: float, skip: str = "none",
                     stamp[bi] = clock
             idle = change <= small if skip == "threshold" else (change == 0.0 and lam[s] == 0.0)
             seen[s] = clock if idle else -2
-        it += 1
-        if not residual > tol:
-            if plain:
-                break
-            relaxed = False
+        it, relaxed, done = next_sweep(it, relaxed, plain, cap, int(not residual > tol))
     return dict(updates=updates, skipped=skipped, sweeps=it, v=np.array(vl))
 
 
