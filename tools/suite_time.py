@@ -3,7 +3,7 @@
 cache, the CPU backend, the Makefile's workers. Prints pytest's summary line and the
 time; with ``--write`` puts them into docs/bench.md (its own section).
 
-    python tools/suite_time.py            # one run of make test (~3-4 min on 2 cores)
+    python tools/suite_time.py            # one run of make test (docs/bench.md "Test suite": its time)
     python tools/suite_time.py --write
 """
 from __future__ import annotations
