@@ -235,7 +235,9 @@ class GaussSeidel:
 
     @ti.func
     def warm_start_serially(self):
-        """Apply every row's warm-start impulse, colour by colour."""
+        """Apply every row's warm-start impulse, colour by colour (one thread: colours
+        share spheres; kernel top level)."""
+        ti.loop_config(serialize=True)
         for colour in range(self.n_colours_f[None]):
             self.sweep_colour(colour, WARM, True, 1.0)
 
