@@ -216,7 +216,8 @@ class Performance:
         (warm-start table, loaded and near flags) alike (takeout.py; with a
         recycling sink only the contact state, discharge.py and Engine.keep_spheres),
         instead of reading every table to the host and loading the scene again
-        (False; a GPU always does that: the moves are serial loops). The same bits.
+        (False; a GPU does that with a recycling sink: keep_spheres' move is a serial
+        loop). The same bits.
     """
 
     serial_light_below: int = 200_000

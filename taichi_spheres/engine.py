@@ -204,7 +204,7 @@ class Engine:
             raise ValueError("take_out: a recycling sink puts spheres back (discharge.py)")
         if self._take_out is None:
             self._take_out = SinkTakeOut(self.state, self.params, self.motion, self.contacts,
-                                         self.solver)
+                                         self.solver, self.key.serial_light)
         return self._take_out.run()
 
     def after_take_out(self, sim, reach=None) -> None:

@@ -475,17 +475,17 @@ class Simulation:
 
     def _discharge(self):
         """Take the spheres in sinks out and continue with the others on the same engine:
-        on the CPU with Performance.discharge_in_place in the engine's fields
-        (Engine.take_out; with a recycling sink on the host, discharge.py, their warm
-        start moved down in the fields, Engine.keep_spheres), or with every table read
-        to the host, renumbered there and loaded again with the scene (the same
-        bits)."""
+        with Performance.discharge_in_place in the engine's fields (Engine.take_out;
+        on the CPU with a recycling sink on the host, discharge.py, their warm start
+        moved down in the fields, Engine.keep_spheres), or with every table read to
+        the host, renumbered there and loaded again with the scene (the same bits)."""
         dtype = np.float64 if self.precision == "f64" else np.float32
-        # (the move is one serial loop: a GPU reloads through the host instead)
-        in_place = self.tuning.performance.discharge_in_place and self.runtime.is_cpu
+        in_place = self.tuning.performance.discharge_in_place
         if in_place and not any(s.recycle for s in self.scene.sinks):
             self._take_out_in_place()
             return
+        # (keep_spheres' move is one serial loop: a GPU reloads through the host instead)
+        in_place = in_place and self.runtime.is_cpu
         scene, rows, warm, gone = discharge.discharge(
             self.scene, self._engine.state.rows(), None if in_place else self._warm_rows(),
             dtype, self._sink_rng)

@@ -17,6 +17,26 @@ from .scene import Scene
 __all__ = ["Features", "SphereState", "State"]
 
 
+#: what copy_sphere moves: the fields a sphere is made of (None where a scene
+#: compiles them out), in SphereState and in takeout.StayerScratch alike
+SPHERE_FIELDS = ("x", "v", "omega", "radius", "inv_mass", "inv_inertia", "material")
+
+
+@ti.func
+def copy_sphere(src: ti.template(), i, dst: ti.template(), j):
+    """Sphere i of ``src`` to index j of ``dst`` (a SphereState or fields of the same
+    names and shapes, takeout.StayerScratch): the SPHERE_FIELDS that ``src`` has."""
+    for name in ti.static(SPHERE_FIELDS):
+        if ti.static(has_field(src, name)):
+            to, source = ti.static(getattr(dst, name), getattr(src, name))
+            to[j] = source[i]
+
+
+def has_field(obj, name: str) -> bool:
+    """``obj`` has a field ``name`` (not None: a feature the scene compiles out)."""
+    return getattr(obj, name, None) is not None
+
+
 @dataclasses.dataclass(frozen=True)
 class Features:
     """What a scene needs compiled in; everything False/empty is compiled out."""
@@ -281,18 +301,7 @@ class SphereState:
     def move_sphere(self, i, j):
         """Sphere i's position, velocity, spin, radius, inverse mass and inertia and
         material to index j (the per-step bookkeeping, moved and hits, stays)."""
-        self.x[j] = self.x[i]
-        self.v[j] = self.v[i]
-        if ti.static(self.features.friction):
-            self.omega[j] = self.omega[i]
-        if ti.static(not self.features.equal_radii):
-            self.radius[j] = self.radius[i]
-        if ti.static(not self.features.equal_masses):
-            self.inv_mass[j] = self.inv_mass[i]
-        if ti.static(self.per_sphere_inertia):
-            self.inv_inertia[j] = self.inv_inertia[i]
-        if ti.static(self.features.materials):
-            self.material[j] = self.material[i]
+        copy_sphere(self, i, self, j)
 
     @ti.func
     def rad(self, i):

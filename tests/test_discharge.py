@@ -17,9 +17,11 @@ GLASS = ts.Material("glass", restitution=0.5, friction=0.3)
 RUBBER = ts.Material("rubber", restitution=0.4, friction=0.6, rolling_friction=0.02)
 
 
-def _silo(recycle=False, materials=False, substeps=True):
+def _silo(recycle=False, materials=False, substeps=True, parallel=False):
     """~60 spheres (radii 4.5-5 mm) in a cylinder on a plane with an orifice of 20 mm,
-    a sink below; friction 0.5, or two materials (one with rolling friction)."""
+    a sink below; friction 0.5, or two materials (one with rolling friction);
+    ``parallel``: the light loops, the take-out among them, run in parallel as on a
+    GPU (Performance.serial_light_below = 0)."""
     rng = np.random.default_rng(3)
     g = (np.arange(5) - 2) * 0.013
     x = np.array([(0.06 + a, 0.06 + b, 0.06 + 0.012 * k) for a in g for b in g
@@ -34,7 +36,8 @@ def _silo(recycle=False, materials=False, substeps=True):
         geometry=[ts.Plane((0.06, 0.06, 0.05), (0, 0, 1), hole=0.02),
                   ts.Cylinder((0.06, 0.06, 0.05), (0, 0, 1), 0.05, length=0.15)],
         sinks=[ts.Sink((0, 0, 0), (0.12, 0.12, 0.03), recycle=recycle)], **extra)
-    return scene, Tuning().with_(substeps=substeps)
+    tuning = Tuning().with_(substeps=substeps)
+    return scene, (tuning.with_(serial_light_below=0) if parallel else tuning)
 
 
 def _warm_in_use(warm: dict) -> dict:
@@ -50,6 +53,7 @@ def _run(scene, tuning, arch, precision, in_place, times):
     """(x, v, omega bytes, warm table, stats, sphere ids) after each of ``times`` [s]."""
     sim = ts.Simulation(scene, arch=arch, precision=precision,
                         tuning=tuning.with_(discharge_in_place=in_place))
+    serial = sim.schedule.serial_light
     out = []
     for t in times:
         sim.advance_to(t)
@@ -59,6 +63,9 @@ def _run(scene, tuning, arch, precision, in_place, times):
                      {k: sim.stats[k] for k in ("steps", "discharged", "contact_iterations",
                                                 "energy_discharged", "contacts")},
                      sim.sphere_ids.tolist()))
+    take_out = sim.debug_view().engine._take_out
+    if in_place:     # the take-out of the schedule: serial, or through the scratch
+        assert (take_out.scratch is None) == serial
     return out, sim.stats["discharged"]
 
 
@@ -72,13 +79,15 @@ def _same_bits_both_ways(arch, precision, case):
 
 
 @pytest.mark.parametrize("case", [
-    dict(materials=True), pytest.param(dict(recycle=True), marks=pytest.mark.slow),
+    dict(materials=True), dict(materials=True, parallel=True),
+    pytest.param(dict(recycle=True), marks=pytest.mark.slow),
     pytest.param(dict(substeps=False), marks=pytest.mark.slow)])
 def test_discharge_in_place_keeps_the_bits_of_a_reload(arch, case):
     """A discharging silo (polydisperse, frictional; with two materials, one with
-    rolling friction; a recycling sink; or without substeps) gives the same positions,
-    velocities, spins, warm-start tables and counters whether the discharge moves the
-    warm start in place or through the host (f64)."""
+    rolling friction, taken out serially or in parallel; a recycling sink; or without
+    substeps) gives the same positions, velocities, spins, warm-start tables and
+    counters whether the discharge moves the warm start in place or through the host
+    (f64)."""
     if arch == "metal":
         pytest.skip("no f64 on this arch")
     _same_bits_both_ways(arch, "f64", case)

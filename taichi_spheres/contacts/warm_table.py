@@ -16,8 +16,33 @@ import numpy as np
 import taichi as ti
 
 from ..discharge import DROPPED_PARTNER
+from ..state import has_field
 
-__all__ = ["WarmTable"]
+__all__ = ["WarmTable", "copy_warm_row"]
+
+
+@ti.func
+def copy_warm_row(src: ti.template(), src_flags: ti.template(), i, dst: ti.template(),
+                  dst_flags: ti.template(), j, new_index: ti.template(), n_old):
+    """Row i of ``src``'s warm-start table (warm_key, warm_lam, warm_t, warm_r, warm_n;
+    a ContactSolver or takeout.StayerScratch) and the loaded and near flags of
+    ``src_flags`` (its SphereState, or the scratch) to row j of ``dst`` and
+    ``dst_flags``; the partners b in [0, n_old) of the rows in use renumbered to
+    new_index[b] (DROPPED_PARTNER where new_index[b] < 0; n_old = 0: none)."""
+    used = src.warm_n[i]
+    for t in ti.static(range(src.warm_key.shape[1])):
+        key = src.warm_key[i, t]
+        if t < used and key >= 0 and key < n_old:
+            key = ti.select(new_index[key] >= 0, new_index[key], DROPPED_PARTNER)
+        dst.warm_key[j, t] = key
+        dst.warm_lam[j, t] = src.warm_lam[i, t]
+        if ti.static(has_field(src, "warm_t")):
+            dst.warm_t[j, t] = src.warm_t[i, t]
+        if ti.static(has_field(src, "warm_r")):
+            dst.warm_r[j, t] = src.warm_r[i, t]
+    dst.warm_n[j] = used
+    dst_flags.loaded[j] = src_flags.loaded[i]
+    dst_flags.near[j] = src_flags.near[i]
 
 
 @ti.data_oriented
@@ -95,20 +120,7 @@ class WarmTable:
         """Sphere i's warm-start rows, loaded and near flags to row j <= i, the partners
         b in [0, n_old) of its rows in use renumbered to new_index[b] (DROPPED_PARTNER
         where new_index[b] < 0). ``new_index``: (n_old,) i32, a field or an ndarray."""
-        used = self.warm_n[i]
-        for t in ti.static(range(self.perf.warm_slots)):
-            key = self.warm_key[i, t]
-            if t < used and key >= 0 and key < n_old:
-                key = ti.select(new_index[key] >= 0, new_index[key], DROPPED_PARTNER)
-            self.warm_key[j, t] = key
-            self.warm_lam[j, t] = self.warm_lam[i, t]
-            if ti.static(self.f.friction):
-                self.warm_t[j, t] = self.warm_t[i, t]
-            if ti.static(self.f.rolling):
-                self.warm_r[j, t] = self.warm_r[i, t]
-        self.warm_n[j] = used
-        self.state.loaded[j] = self.state.loaded[i]
-        self.state.near[j] = self.state.near[i]
+        copy_warm_row(self, self.state, i, self, self.state, j, new_index, n_old)
 
     @ti.func
     def empty_warm_row(self, i):
