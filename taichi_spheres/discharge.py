@@ -5,10 +5,10 @@ The step counts the spheres in sinks at the end of its drift (params.in_sinks, r
 back with the other counters); when there are some, the Simulation removes them and
 continues with the remaining spheres on the same engine (its fields hold up to their
 capacity; the contact solver's warm start is renumbered so that the remaining contacts
-keep their impulses). On the CPU without a recycling sink the engine takes them out
-in its fields (takeout.py) and :func:`without` books what left; otherwise
-:func:`discharge` removes or recycles them here, on the host, the warm start moved in
-the engine's fields (contacts/warm_table.py) or renumbered here (renumber_warm).
+keep their impulses). Without a recycling sink the engine takes them out in its fields
+(takeout.py) and :func:`without` books what left; otherwise :func:`discharge` removes
+or recycles them here, on the host, the warm start moved in the engine's fields on the
+CPU (contacts/warm_table.py) or renumbered here (renumber_warm).
 Numpy only.
 """
 from __future__ import annotations

@@ -14,7 +14,7 @@ import taichi as ti
 
 from .scene import Scene
 
-__all__ = ["Features", "SphereState", "State"]
+__all__ = ["Features", "SphereState", "State", "SPHERE_FIELDS", "copy_sphere", "has_field"]
 
 
 #: what copy_sphere moves: the fields a sphere is made of (None where a scene

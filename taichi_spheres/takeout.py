@@ -25,7 +25,7 @@ constants.
 import numpy as np
 import taichi as ti
 
-from .contacts.warm_table import copy_warm_row
+from .contacts.warm_table import WARM_FIELDS, copy_warm_row
 from .state import SPHERE_FIELDS, copy_sphere
 
 __all__ = ["SinkTakeOut", "StayerScratch"]
@@ -46,8 +46,7 @@ class StayerScratch:
     def __init__(self, state, solver):
         for name in SPHERE_FIELDS:
             setattr(self, name, _like(getattr(state, name)))
-        table = ("warm_key", "warm_lam", "warm_t", "warm_r", "warm_n")
-        for name in table:
+        for name in WARM_FIELDS:
             setattr(self, name, _like(getattr(solver, name)) if solver is not None else None)
         self.loaded = _like(state.loaded) if solver is not None else None
         self.near = _like(state.near) if solver is not None else None

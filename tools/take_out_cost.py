@@ -15,7 +15,7 @@ spacing 2.2 r at rest on the floor of a box under gravity, a sink over the botto
 corner; the lowest layer falls 0.1 r into it, then the layers above follow, one
 discharge at a time. Each way runs the same ``--duration`` s; reported per way: the
 discharges, the spheres taken out, and the wall ms of each discharge (the first one
-includes compiling the take-out kernels, so the later ones are the cost). All three end
+includes compiling kernels, so the later ones are the cost). All three end
 in the same state (the test suite checks the bits, tests/test_discharge.py).
 
     python tools/take_out_cost.py                    # 10^5 spheres, 2 threads, ~2 min
@@ -88,7 +88,7 @@ def report(args, rows: dict, n: int) -> str:
              f"`python tools/take_out_cost.py {' '.join(a for a in sys.argv[1:] if a != '--write')}`",
              "", f"{n} spheres on a lattice at rest, a sink over the floor of one corner; "
              f"{args.duration} s, one discharge per layer that reaches it (the first "
-             "includes compiling the take-out).", "",
+             "includes compiling kernels).", "",
              "| way | discharges | spheres taken out | ms per discharge (first; later ones) "
              "| end state digest |", "|---|---|---|---|---|"]
     for label, r in rows.items():

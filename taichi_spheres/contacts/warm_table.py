@@ -18,7 +18,11 @@ import taichi as ti
 from ..discharge import DROPPED_PARTNER
 from ..state import has_field
 
-__all__ = ["WarmTable", "copy_warm_row"]
+__all__ = ["WarmTable", "copy_warm_row", "WARM_FIELDS"]
+
+#: a sphere's warm-start rows in the solver's fields (warm_t with friction, warm_r with
+#: rolling friction, else None), as copy_warm_row moves them
+WARM_FIELDS = ("warm_key", "warm_lam", "warm_t", "warm_r", "warm_n")
 
 
 @ti.func
