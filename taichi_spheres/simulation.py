@@ -484,20 +484,21 @@ class Simulation:
         if in_place and not any(s.recycle for s in self.scene.sinks):
             self._take_out_in_place()
             return
+        # a recycling sink: the warm start moves down in the fields on the CPU
         # (keep_spheres' move is one serial loop: a GPU reloads through the host instead)
-        in_place = in_place and self.runtime.is_cpu
+        warm_in_fields = in_place and self.runtime.is_cpu
         scene, rows, warm, gone = discharge.discharge(
-            self.scene, self._engine.state.rows(), None if in_place else self._warm_rows(),
-            dtype, self._sink_rng)
+            self.scene, self._engine.state.rows(),
+            None if warm_in_fields else self._warm_rows(), dtype, self._sink_rng)
         self._book_discharge(gone)
         self.scene = scene
-        if not in_place or scene.n == 0:
+        if not warm_in_fields or scene.n == 0:
             self._parked = rows + (warm,)
             self._engine.release(self)
         if scene.n == 0:           # every sphere has left: time still runs, nothing moves
             self._vmax2 = self._vmax2_near = 0.0
             return
-        if in_place:
+        if warm_in_fields:
             self._engine.keep_spheres(self, *rows, gone.kept, self._reach())
         else:
             self._bind()

@@ -183,15 +183,14 @@ class SinkTakeOut:
         first = self.first_taken[None]
         for i in range(n_old):
             j = self.new_index[i]
-            if j >= 0:
-                if i >= first:
-                    copy_sphere(self.state, i, self.scratch, j)
+            if j >= 0 and i >= first:
+                copy_sphere(self.state, i, self.scratch, j)
                 if ti.static(self.has_solver):
-                    if i >= first:
-                        copy_warm_row(self.solver, self.state, i, self.scratch, self.scratch,
-                                      j, self.new_index, n_old)
-                    else:
-                        self.solver.move_warm_row(i, i, self.new_index, n_old)
+                    copy_warm_row(self.solver, self.state, i, self.scratch, self.scratch, j,
+                                  self.new_index, n_old)
+            elif j >= 0:
+                if ti.static(self.has_solver):
+                    self.solver.move_warm_row(i, i, self.new_index, n_old)
 
     @ti.func
     def unstage_the_stayers(self):

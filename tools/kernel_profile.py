@@ -86,16 +86,19 @@ def capped_steps(sim, window: float):
     solver = sim.debug_view().solver
     if solver is None:
         return None
-    start, end = sim.checkpoint(), sim.time + window
-    steps = velocity = position = 0
-    while sim.time < end:
-        before = dict(sim.stats)
-        sim.step_toward(end)
-        steps += 1
-        velocity += sim.stats["contact_iterations"] - before["contact_iterations"] >= solver.cap_v[None]
-        position += sim.stats["position_iterations"] - before["position_iterations"] >= solver.cap_w[None]
-    sim.restore(start)
-    return steps, velocity, position
+    counts = [0, 0, 0]
+
+    def walk(s):
+        end = s.time + window
+        while s.time < end:
+            before = dict(s.stats)
+            s.step_toward(end)
+            counts[0] += 1
+            counts[1] += s.stats["contact_iterations"] - before["contact_iterations"] >= solver.cap_v[None]
+            counts[2] += s.stats["position_iterations"] - before["position_iterations"] >= solver.cap_w[None]
+
+    untimed_pass(sim, walk)
+    return tuple(counts)
 
 
 def capped(counts) -> str:
