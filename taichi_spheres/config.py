@@ -278,19 +278,32 @@ class Tuning:
                       performance=dataclasses.replace(self.performance, **groups["performance"]))
 
     def compiled(self) -> "Tuning":
-        """This Tuning with the options no kernel compiles in (HOST_ONLY, SOLVER_VALUES)
-        at their defaults: what an engine's kernels compile in (engine.EngineKey), so
-        that Simulations differing only in those share compiled engines."""
+        """This Tuning with the options that choose no engine (HOST_ONLY,
+        KERNEL_VARIANTS, SOLVER_VALUES) at their defaults: what an engine's kernels
+        compile in (engine.EngineKey), so that Simulations differing only in those
+        share compiled engines."""
         return Tuning(
             physics=dataclasses.replace(
                 self.physics, **{name: getattr(Rules(), name) for name in SOLVER_VALUES}),
             performance=dataclasses.replace(
-                self.performance, **{name: getattr(Performance(), name) for name in HOST_ONLY}))
+                self.performance, **{name: getattr(Performance(), name)
+                                     for name in HOST_ONLY + KERNEL_VARIANTS}))
 
 
-#: Performance options that only the host reads (Simulation): they do not enter the
-#: compiled engines' key (Tuning.compiled)
-HOST_ONLY = ("discharge_in_place",)
+#: Performance options that only the host reads: the Simulation (the schedule's sphere
+#: counts, which the key holds as engine.Schedule's flags; the discharge), or the engine's
+#: parts from the Simulation bound to them (Engine.bind: the impact sweep's path by its
+#: pending pairs, the contact solver's one-launch path and sweeps per wait). They do not
+#: enter the compiled engines' key (Tuning.compiled), so Simulations that differ only in
+#: them share an engine
+HOST_ONLY = ("serial_light_below", "serial_heavy_below", "near_lists_from", "few_pairs",
+             "serial_resolve_pairs", "serial_solver_below", "sweeps_per_wait",
+             "gpu_sweeps_per_wait", "discharge_in_place")
+#: Performance options that choose among variants of a few of an engine's kernels, each
+#: variant built on first use by the Simulation bound to the engine (the contact
+#: solver's sweeping kernels: ContactSolver.load_host_options): Simulations that differ
+#: only in them share an engine, and each variant compiles only those kernels
+KERNEL_VARIANTS = ("solver_interleave", "frictional_interleave", "parallel_interleave")
 #: Rules the contact solver's kernels read as values in fields, loaded when a
 #: Simulation binds its engine (contacts/solver.py ContactSolver.load_sweep_rules):
 #: Simulations that differ only in these share compiled engines

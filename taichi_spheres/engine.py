@@ -6,7 +6,8 @@ scene's numbers (sphere count, box, cell layout, radii, masses, restitution, gra
 are data in those fields, and only what changes the code is compiled in: the
 features (``state.Features``), the serial/parallel loop variants chosen by the
 sphere count, near lists, and the options (``config.Tuning.compiled``: less those only
-the host reads and the contact solver's sweep rules, which are data too). A Simulation asks the
+the host reads, those that choose a variant of the contact solver's sweeping kernels
+(built on first use), and the contact solver's sweep rules, which are data too). A Simulation asks the
 pool for an engine with its key and room for its spheres and cells; a later
 Simulation with the same key and no more spheres or cells runs on the same engine
 and compiles nothing (``tools/compile_once.py`` measures it).
@@ -169,9 +170,10 @@ class Engine:
         self.state.bind(scene, x, v, omega)
         self.params.bind(scene, rest_speed)
         self.grid.bind(geom)
-        self.contacts.bind(scene, geom)
+        perf = sim.tuning.performance
+        self.contacts.bind(scene, geom, perf)
         if self.solver is not None:
-            self.solver.bind(scene, geom, reach, sim.tuning.physics)
+            self.solver.bind(scene, geom, reach, sim.tuning.physics, perf)
             if warm is not None:
                 self.solver.load_warm(warm)
         self._occupant = weakref.ref(sim)
@@ -188,7 +190,7 @@ class Engine:
             raise RuntimeError("keep_spheres: the Simulation is not the one bound here")
         scene = sim.scene
         self.state.bind(scene, x, v, omega)
-        self.contacts.bind(scene, sim.geometry)
+        self.contacts.bind(scene, sim.geometry, sim.tuning.performance)
         if self.solver is not None:
             self.solver.keep_spheres(scene, sim.geometry, reach, kept)
         self._scalars = scalar_sources(scene, reach)
@@ -234,10 +236,11 @@ def scalar_sources(scene, reach) -> tuple:
             float(scene.radius.max()), reach)
 
 
-#: A new engine has room for at least this many spheres and cells (small scenes share
-#: one engine; a few hundred kB of fields).
-MIN_SPHERES = 1024
-MIN_CELLS = 8192
+#: A new engine has room for at least this many spheres and cells: small scenes share
+#: one engine (a few MB of fields for a contact scene in f64), and a later scene of a
+#: few thousand spheres still fits, without compiling its kernels again.
+MIN_SPHERES = 4096
+MIN_CELLS = 16384
 
 
 def capacity_for(count: int, minimum: int) -> int:

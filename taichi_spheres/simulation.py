@@ -100,11 +100,12 @@ def field_bytes_for(spheres: int, cells: int, features: Features, near_lists: bo
     per_cell = 9 * 4   # start, cursor; active, cell_pairs (2 x 2), active_list, by_colour
     if features.contacts:
         # solver rows (a, b; normal, gap, targets, meff, lam, mu), v_pre, x_pre, w, warm
+        # table; warm_n, unrowed, the state's loaded and near flags
         per_sphere += perf.contacts_per_sphere * (2 * 4 + 9 * real) + 9 * real \
-            + perf.warm_slots * (4 + real) + 4
+            + perf.warm_slots * (4 + real) + 4 * 4
         if features.gravity:
             per_sphere += real      # drop (ContactSolver.close_support_gaps)
-        per_cell += 3 * 4   # cell_count, cell_fill, cell_start
+        per_cell += 4 * 4   # cell_count, cell_fill, cell_start, active_cells
     return spheres * per_sphere + cells * per_cell
 
 

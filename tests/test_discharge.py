@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import taichi_spheres as ts
-from taichi_spheres.config import Tuning
+from taichi_spheres.config import HOST_ONLY, KERNEL_VARIANTS, Tuning
 from taichi_spheres.discharge import DROPPED_PARTNER, renumber_warm
 
 GLASS = ts.Material("glass", restitution=0.5, friction=0.3)
@@ -133,16 +133,37 @@ def test_discharge_in_place_keeps_the_bits_of_a_reload_in_f32(arch):
 
 
 def test_host_only_options_share_the_compiled_engine(arch):
-    """discharge_in_place is read by the host only: it is left out of the engines' key,
-    and Simulations that differ only in it run on one engine."""
-    a = Tuning().with_(discharge_in_place=False)
-    assert a.compiled() == Tuning().compiled() == Tuning()
-    assert a.performance.discharge_in_place is False
+    """The options only the host reads (config.HOST_ONLY: the schedule's sphere counts,
+    the impact sweep's and the contact solve's paths, sweeps per wait,
+    discharge_in_place) and those that choose a variant of the solver's sweeping
+    kernels (config.KERNEL_VARIANTS: the interleaving) are left out of the engines'
+    key: Simulations that differ only in them run on one engine, and the engine's parts
+    read each one's own options while it is bound (Engine.bind), the solver launching
+    the kernel variant of its interleaving."""
     scene, tuning = _silo()
+    host = dict(discharge_in_place=False, few_pairs=7, serial_resolve_pairs=9,
+                serial_solver_below=5, sweeps_per_wait=3, gpu_sweeps_per_wait=5,
+                near_lists_from=scene.n + 1, serial_light_below=scene.n + 1,
+                serial_heavy_below=scene.n + 1, solver_interleave=3,
+                frictional_interleave=2, parallel_interleave=5)
+    assert set(host) == set(HOST_ONLY + KERNEL_VARIANTS)
+    assert Tuning().with_(**host).compiled() == Tuning().compiled() == Tuning()
     one = ts.Simulation(scene, arch=arch, precision="f64", tuning=tuning)
-    other = ts.Simulation(scene, arch=arch, precision="f64",
-                          tuning=tuning.with_(discharge_in_place=False))
-    assert one.debug_view().engine is other.debug_view().engine
+    other = ts.Simulation(scene, arch=arch, precision="f64", tuning=tuning.with_(**host))
+    engine = one.debug_view().engine
+    assert other.debug_view().engine is engine
+    assert other.tuning.performance.discharge_in_place is False
+    for sim in (other, one, other):
+        sim.advance(1e-3)
+        perf = sim.tuning.performance
+        assert engine.contacts.host is perf
+        assert engine.solver.serial_solver_below == perf.serial_solver_below
+        assert engine.solver.batch == (perf.sweeps_per_wait if sim.runtime.is_cpu
+                                       else perf.gpu_sweeps_per_wait)
+        assert engine.solver.interleave == (perf.frictional_interleave if sim.runtime.is_cpu
+                                            else 1)
+    if one.runtime.is_cpu:     # a one-launch solve kernel per interleaving (serial engines)
+        assert set(engine.solver._serial_solves) == {2, Tuning().performance.frictional_interleave}
 
 
 def _random_warm_table(solver, n: int, rng) -> dict:

@@ -16,7 +16,7 @@ import typing
 import numpy as np
 import taichi as ti
 
-from ..config import DEFAULT, Tuning
+from ..config import DEFAULT, Performance, Tuning
 from ..params import StepParams
 from ..grid import BLOCK_PAIRS, FORWARD_ROWS, Grid
 from ..state import Features, SphereState
@@ -68,6 +68,8 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
                  serial_few: bool = False, near_lists: bool = False, tuning: Tuning = DEFAULT):
         self.rules = tuning.physics
         self.perf = tuning.performance
+        #: the bound Simulation's options (config.HOST_ONLY: few_pairs, serial_resolve_pairs)
+        self.host = tuning.performance
         self.state = state
         self.grid = grid
         self.params = params
@@ -201,9 +203,12 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
         self.sweep_mixed = sweep_mixed
         self.after_sweep_parallel = after_sweep_parallel
 
-    def bind(self, scene, geom):
+    def bind(self, scene, geom, perf: Performance):
         """Load what the kernels read of a scene and its grid geometry ``geom`` (after
-        state.bind and grid.bind); forget the near lists and any pending pairs."""
+        state.bind and grid.bind), and the bound Simulation's host-only options ``perf``
+        (config.Performance: the sweep's path, sweep); forget the near lists and any
+        pending pairs."""
+        self.host = perf
         self.bind_scalars(scene, geom)
         self.forget()
 
@@ -263,9 +268,9 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
         serially and the detection in parallel, in one launch; otherwise (and on GPUs)
         the colours run in parallel one launch each. (A kernel looping over sweeps
         would save a launch per sweep but doubles the compile time: see fused.py.)"""
-        if self.serial_heavy or (self.serial_few and pending <= self.perf.few_pairs):
+        if self.serial_heavy or (self.serial_few and pending <= self.host.few_pairs):
             return self.sweep_serial()
-        if self.serial_few and pending <= self.perf.serial_resolve_pairs:
+        if self.serial_few and pending <= self.host.serial_resolve_pairs:
             return self.sweep_mixed()
         self.bucket_parallel()
         for k in range(len(self.colours)):

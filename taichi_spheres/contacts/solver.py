@@ -123,23 +123,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.rules = tuning.physics
         self.perf = tuning.performance
         self.capacity = self.perf.contacts_per_sphere * state.capacity
-        # cells one thread sweeps interleaved (pgs.sweep_cells): serial sweeps, and
-        # parallel ones on a one-thread runtime, take Performance.solver_interleave
-        # (frictional_interleave with friction), parallel ones on several threads
-        # parallel_interleave; a GPU hides latency with more threads instead
-        cfg = ti.lang.impl.current_cfg()
-        one_thread = (self.perf.frictional_interleave if features.friction
-                      else self.perf.solver_interleave)
-        self.interleave = one_thread if cpu else 1
-        self.interleave_parallel = (self.interleave if cfg.cpu_max_num_threads == 1 else
-                                    self.perf.parallel_interleave) if cpu else 1
-        # loop iterations per task of a parallel sweep on the CPU: as many cells as
-        # Taichi's default block (32), as block / interleave iterations (a power of
-        # two), so that a colour still splits into as many tasks; a GPU keeps its default
-        per_task = max(1, cfg.default_cpu_block_dim // self.interleave_parallel)
-        self.sweep_block = 1 << (per_task.bit_length() - 1) if cpu else None
-        # sweeps a parallel solve launches before it waits (pgs.batched_sweep)
-        self.batch = self.perf.sweeps_per_wait if cpu else self.perf.gpu_sweeps_per_wait
+        self.load_host_options(self.perf)
         self.shock = shock_compiled(features, self.rules)
         # warm_energy.py: the warm start scaled so that it adds no energy
         bound = self.rules.bounded_warm_start
@@ -233,17 +217,44 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.batch_plain = ti.field(ti.i32, shape=())
         self.batch_omega = ti.field(self.real, shape=())
 
-    def bind(self, scene, geom, reach, rules):
+    def bind(self, scene, geom, reach, rules, perf):
         """Load a scene's grid geometry ``geom`` (colours; the speculative margin: the
-        grid's slack, or ``reach`` [m] if smaller; None: the slack) and the
-        Simulation's sweep ``rules`` (config.Rules: the engine's own hold the defaults
-        of config.SOLVER_VALUES), and forget the warm start."""
+        grid's slack, or ``reach`` [m] if smaller; None: the slack), the Simulation's
+        sweep ``rules`` (config.Rules: the engine's own hold the defaults of
+        config.SOLVER_VALUES) and its host-only options ``perf`` (config.Performance:
+        load_host_options), and forget the warm start."""
         self.bind_scalars(scene, geom, reach)
         self.load_sweep_rules(rules)
+        self.load_host_options(perf)
         self.h_prev[None] = 0
         self.warm_n.fill(0)
         self.state.loaded.fill(0)
         self.state.near.fill(0)
+
+    def load_host_options(self, perf) -> None:
+        """The options of ``perf`` (config.Performance) that solve() reads
+        (config.HOST_ONLY): the spheres below which a parallel engine on the CPU solves
+        in one launch, and the sweeps a parallel solve launches before it waits
+        (pgs.batched_sweep; sweeps_per_wait on the CPU, gpu_sweeps_per_wait on a GPU);
+        and those that choose the variant of the sweeping kernels it launches
+        (config.KERNEL_VARIANTS, each variant built on first use: _serial_solve,
+        _sweep): the cells one thread sweeps interleaved (pgs.sweep_cells). Serial
+        sweeps, and parallel ones on a one-thread runtime, take
+        Performance.solver_interleave (frictional_interleave with friction), parallel
+        ones on several threads parallel_interleave; a GPU hides latency with more
+        threads instead (one cell each)."""
+        self.serial_solver_below = perf.serial_solver_below
+        self.batch = perf.sweeps_per_wait if self.cpu else perf.gpu_sweeps_per_wait
+        cfg = ti.lang.impl.current_cfg()
+        one_thread = perf.frictional_interleave if self.f.friction else perf.solver_interleave
+        self.interleave = one_thread if self.cpu else 1
+        self.interleave_parallel = (self.interleave if cfg.cpu_max_num_threads == 1 else
+                                    perf.parallel_interleave) if self.cpu else 1
+        # loop iterations per task of a parallel sweep on the CPU: as many cells as
+        # Taichi's default block (32), as block / interleave iterations (a power of
+        # two), so that a colour still splits into as many tasks; a GPU keeps its default
+        per_task = max(1, cfg.default_cpu_block_dim // self.interleave_parallel)
+        self.sweep_block = 1 << (per_task.bit_length() - 1) if self.cpu else None
 
     def load_sweep_rules(self, rules) -> None:
         """The sweep rules (config.SOLVER_VALUES) of ``rules`` (config.Rules), which the
@@ -441,24 +452,28 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         """The kernels solve() launches (plain closures: no per-launch `self` dispatch)."""
         params = self.params
 
-        @ti.kernel
-        def solve_serial():
-            self.set_tolerances()
-            self.gather()
-            self.list_active_cells()
-            self.prepare_rows()
-            self.warm_start_serially()
-            if ti.static(self.bounded_warm_start):
-                self.bound_warm_start()
-            params.contact_iterations[None] = self.iterate_serially(
-                VELOCITY, self.cap_v, self.plain_v, self.tol_v)
-            params.contact_residual[None] = self.residual[None]
-            if ti.static(self.shock):
-                self.shock_pass()
-            self.position_targets()
-            params.position_iterations[None] = self.iterate_serially(
-                POSITION, self.cap_w, self.plain_w, self.tol_w)
-            self.finish()
+        def serial_solve_kernel():
+            """The one-launch solve for the bound interleave (self.interleave, read when
+            it compiles: _serial_solve keeps one per interleave)."""
+            @ti.kernel
+            def solve_serial():
+                self.set_tolerances()
+                self.gather()
+                self.list_active_cells()
+                self.prepare_rows()
+                self.warm_start_serially()
+                if ti.static(self.bounded_warm_start):
+                    self.bound_warm_start()
+                params.contact_iterations[None] = self.iterate_serially(
+                    VELOCITY, self.cap_v, self.plain_v, self.tol_v)
+                params.contact_residual[None] = self.residual[None]
+                if ti.static(self.shock):
+                    self.shock_pass()
+                self.position_targets()
+                params.position_iterations[None] = self.iterate_serially(
+                    POSITION, self.cap_w, self.plain_w, self.tol_w)
+                self.finish()
+            return solve_serial
 
         @ti.kernel
         def start() -> ti.i32:
@@ -486,7 +501,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             params.position_iterations[None] = positions
             self.finish()
 
-        self._solve_serial = solve_serial
+        self._serial_solve_kernel = serial_solve_kernel
+        self._serial_solves = {}
         self._start, self._middle, self._end = start, middle, end
         self._bound_warm = bound_warm
 
@@ -523,10 +539,18 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self._batch_result = batch_result
         self._sweeps = {}
 
+    def _serial_solve(self):
+        """The one-launch solve kernel of the bound interleave (built once per
+        interleave: load_host_options)."""
+        if self.interleave not in self._serial_solves:
+            self._serial_solves[self.interleave] = self._serial_solve_kernel()
+        return self._serial_solves[self.interleave]
+
     def _sweep(self, mode, batched=None):
-        """The one-sweep kernel of ``mode`` for the bound colour count (built once);
-        ``batched``: (caps, last, tol) of a batched solve, whose sweep kernel it is."""
-        key = (mode, self.n_colours, batched is not None)
+        """The one-sweep kernel of ``mode`` for the bound colour count and parallel
+        interleave (built once each: load_host_options); ``batched``: (caps, last, tol)
+        of a batched solve, whose sweep kernel it is."""
+        key = (mode, self.n_colours, batched is not None, self.interleave_parallel)
         if key not in self._sweeps:
             self._sweeps[key] = (self._sweep_kernel(mode, self.n_colours) if batched is None
                                  else self._batched_kernel(mode, self.n_colours, *batched))
@@ -538,8 +562,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         contact_residual, position_iterations, energy_contacts, contact_overlap). On
         the CPU below Performance.serial_solver_below spheres the sweeps run serially
         in one launch (a parallel launch per sweep costs ~150 us there)."""
-        if self.serial or (self.cpu and self.n < self.perf.serial_solver_below):
-            self._solve_serial()      # the same sweeps in one launch: the same bits
+        if self.serial or (self.cpu and self.n < self.serial_solver_below):
+            self._serial_solve()()      # the same sweeps in one launch: the same bits
             return
         self._start()
         if self.rules.warm_start:
