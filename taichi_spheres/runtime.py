@@ -66,7 +66,7 @@ class Runtime:
     arch: str          # what was asked: cpu|gpu|cuda|vulkan|metal
     actual: str        # what Taichi runs on: x64|arm64|cuda|vulkan|metal|...
     precision: str     # f32|f64 (Taichi's default_fp)
-    threads: int | None
+    threads: int | None   # CPU threads (asked for, else Taichi's default); None on GPUs
     generation: int
     compile: str = "optimized"   # COMPILE_MODES key
 
@@ -106,7 +106,8 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
            compile: str | None = None) -> Runtime:
     """Initialise Taichi for (arch, precision, threads, compile mode) unless it already
     is; return it. threads None: any thread count if the current runtime fits, else
-    Taichi's default; compile None: the current runtime's mode, also when Taichi is
+    Taichi's default (a CPU runtime started with the default keeps the count it got,
+    so that asking for that count later keeps it); compile None: the current runtime's mode, also when Taichi is
     re-initialised for another arch or precision (for the first runtime,
     TAICHI_SPHERES_COMPILE's, else "optimized"). A re-initialisation makes earlier
     Simulations stale (see check)."""
@@ -142,6 +143,8 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
     if actual not in ("x64", "arm64"):
         refuse_broken_loops(arch, actual, probe_loops())
     _generation += 1
+    if threads is None and actual in ("x64", "arm64"):
+        threads = ti.lang.impl.current_cfg().cpu_max_num_threads
     _current = Runtime(arch=arch, actual=actual, precision=want, threads=threads,
                        generation=_generation, compile=mode)
     return _current

@@ -2,6 +2,7 @@
 bit-for-bit reproducible, steps land on requested times, features compile out."""
 import numpy as np
 import pytest
+import taichi as ti
 
 import taichi_spheres as ts
 from taichi_spheres.builders import gas, same_bits_scene
@@ -176,6 +177,24 @@ def test_stale_simulation_refuses_to_run(arch):
     ts.Simulation(gas(50, periodic=True), arch=arch, precision="f32")   # re-initialises
     with pytest.raises(RuntimeError, match="re-initialised"):
         sim.advance(0.1)
+
+
+@pytest.mark.own_runtime
+def test_asking_for_the_default_thread_count_keeps_the_runtime(arch):
+    """A CPU runtime started without a thread count has Taichi's default; a Simulation
+    that asks for that count runs on it, and earlier Simulations stay usable."""
+    from taichi_spheres import runtime
+    if arch != "cpu":
+        pytest.skip("thread counts are a CPU setting")
+    runtime.ensure(arch, "f32")
+    default = runtime.ensure(arch, "f64")      # re-initialised without a thread count
+    assert default.threads == ti.lang.impl.current_cfg().cpu_max_num_threads >= 1
+    sim = ts.Simulation(gas(50, periodic=True), arch=arch, precision="f64")
+    other = ts.Simulation(gas(50, periodic=True), arch=arch, precision="f64",
+                          threads=default.threads)
+    assert other.runtime is default and sim.runtime is default
+    sim.advance(0.01)
+    assert sim.stats["steps"] > 0
 
 
 @pytest.mark.own_runtime
