@@ -218,6 +218,11 @@ class Performance:
         instead of reading every table to the host and loading the scene again
         (False; a GPU does that with a recycling sink: keep_spheres' move is a serial
         loop). The same bits.
+    staged_solve: launch the contact solver's serial solve as one kernel per stage
+        (contacts/solver.py SOLVE_STAGES: gather, list cells, prepare, warm start,
+        velocity sweeps, position targets, position sweeps, finish) instead of one, so
+        that a kernel profile shows each stage's time (tools/kernel_profile.py
+        --stages). The same bits, a few launches more per step.
     """
 
     serial_light_below: int = 200_000
@@ -245,6 +250,7 @@ class Performance:
     sweeps_per_wait: int = 1
     gpu_sweeps_per_wait: int = 8
     discharge_in_place: bool = True
+    staged_solve: bool = False
 
     def __post_init__(self):
         """ValueError naming the field: solver_interleave, frictional_interleave,
@@ -303,7 +309,8 @@ HOST_ONLY = ("serial_light_below", "serial_heavy_below", "near_lists_from", "few
 #: variant built on first use by the Simulation bound to the engine (the contact
 #: solver's sweeping kernels: ContactSolver.load_host_options): Simulations that differ
 #: only in them share an engine, and each variant compiles only those kernels
-KERNEL_VARIANTS = ("solver_interleave", "frictional_interleave", "parallel_interleave")
+KERNEL_VARIANTS = ("solver_interleave", "frictional_interleave", "parallel_interleave",
+                   "staged_solve")
 #: Rules the contact solver's kernels read as values in fields, loaded when a
 #: Simulation binds its engine (contacts/solver.py ContactSolver.load_sweep_rules):
 #: Simulations that differ only in these share compiled engines

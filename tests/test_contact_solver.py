@@ -693,3 +693,18 @@ def test_max_overlap_counts_pairs_and_walls_without_rows(arch, precision, subste
     assert worst < 1e-3 if substeps else worst > 5e-4
     assert under <= (1e-12 if precision == "f64" else 1e-5)
     assert sim.stats["max_overlap"] >= worst - (1e-12 if precision == "f64" else 1e-5)
+
+
+def test_staged_solve_keeps_the_bits_of_one_launch(arch):
+    """Performance.staged_solve launches the serial solve one kernel per stage
+    (contacts/solver.py SOLVE_STAGES, for profiles): the same state and counters as
+    the one launch, on the same engine."""
+    scene = fcc_block(3)
+    runs = []
+    for staged in (False, True):
+        sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(staged_solve=staged))
+        sim.advance(0.1)
+        runs.append((observe.state_digest(sim.state(), sim.precision), sim.stats["contacts"],
+                     sim.stats["contact_iterations"], sim.debug_view().engine))
+    assert runs[0][:3] == runs[1][:3] and runs[0][1] > 0
+    assert runs[0][3] is runs[1][3]

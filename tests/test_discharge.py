@@ -145,7 +145,7 @@ def test_host_only_options_share_the_compiled_engine(arch):
                 serial_solver_below=5, sweeps_per_wait=3, gpu_sweeps_per_wait=5,
                 near_lists_from=scene.n + 1, serial_light_below=scene.n + 1,
                 serial_heavy_below=scene.n + 1, solver_interleave=3,
-                frictional_interleave=2, parallel_interleave=5)
+                frictional_interleave=2, parallel_interleave=5, staged_solve=True)
     assert set(host) == set(HOST_ONLY + KERNEL_VARIANTS)
     assert Tuning().with_(**host).compiled() == Tuning().compiled() == Tuning()
     one = ts.Simulation(scene, arch=arch, precision="f64", tuning=tuning)
@@ -162,8 +162,9 @@ def test_host_only_options_share_the_compiled_engine(arch):
                                        else perf.gpu_sweeps_per_wait)
         assert engine.solver.interleave == (perf.frictional_interleave if sim.runtime.is_cpu
                                             else 1)
-    if one.runtime.is_cpu:     # a one-launch solve kernel per interleaving (serial engines)
-        assert set(engine.solver._serial_solves) == {2, Tuning().performance.frictional_interleave}
+    if one.runtime.is_cpu:     # a serial solve per interleaving and staging (serial engines)
+        assert set(engine.solver._serial_solves) == {
+            (2, True), (Tuning().performance.frictional_interleave, False)}
 
 
 def _random_warm_table(solver, n: int, rng) -> dict:

@@ -16,12 +16,14 @@ on), contact rows and sweeps per step, and each kernel's share of the kernel tim
 its mean ms per launch. Taichi names a kernel's tasks ``<kernel>_c<n>_<k>_kernel_<task>``:
 ``solve_serial`` is the contact solver of the serial engines (Taichi merges its
 consecutive serial loops: task 0 searches for the rows, task 2 places them and holds
-the warm start, the velocity and position sweeps and the rest), ``sweep`` one
-parallel sweep, ``detect_*`` and ``build`` the grid and detection, ``drift`` the
+the warm start, the velocity and position sweeps and the rest; with ``--stages`` each
+stage is a kernel of its own, ``solve_<stage>``: contacts/solver.py SOLVE_STAGES),
+``sweep`` one parallel sweep, ``detect_*`` and ``build`` the grid and detection, ``drift`` the
 flight.
 
     python tools/kernel_profile.py --scene scenes/pour.toml --at 1.0 --window 0.2
     python tools/kernel_profile.py --silo --write
+    python tools/kernel_profile.py --silo --stages --write   # the serial solve's stages
     python tools/kernel_profile.py --silo --tuning step_scaled_sweeps=False contact_iterations=60
     python tools/kernel_profile.py --gas 10000 --arch cuda --window 0.02 --host
     python tools/kernel_profile.py --silo-large 100000 --arch cuda --window 0.01
@@ -42,6 +44,7 @@ import taichi as ti  # noqa: E402
 from taichi.profiler.kernel_profiler import get_default_kernel_profiler  # noqa: E402
 
 import taichi_spheres as ts  # noqa: E402
+from taichi_spheres.config import Tuning  # noqa: E402
 from taichi_spheres import runtime  # noqa: E402
 from machine import hardware, publish, untimed_pass  # noqa: E402
 
@@ -146,6 +149,10 @@ def main(argv=None):
                     help="also profile the Python side of the window (cProfile, top 15)")
     ap.add_argument("--tuning", nargs="+", default=[], metavar="NAME=VALUE",
                     help="with --silo: Tuning.with_ keywords of its run (tools/silo.py's)")
+    ap.add_argument("--stages", action="store_true",
+                    help="launch the serial contact solve one kernel per stage "
+                         "(Performance.staged_solve, the same bits): the table then "
+                         "shows each stage (gather, sweeps, ...) as a kernel of its own")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args(argv)
     if args.tuning and not args.silo:
@@ -160,11 +167,15 @@ def main(argv=None):
         ap.error("--silo-large runs in f64 on cpu or cuda (the silo of tools/silo_large.py)")
     if args.silo and (args.arch != "cpu" or args.precision != "f64"):
         ap.error("--silo runs on the CPU in f64 (the silo of tools/silo.py)")
+    if args.stages and (args.silo_large or args.gas):
+        ap.error("--stages goes with --silo or --scene (a serial solve on the CPU)")
     for mode in runtime.COMPILE_MODES.values():
         mode["kernel_profiler"] = True
     threads = 1 if args.arch == "cpu" else None
     runtime.ensure(args.arch, args.precision, threads=threads)
     sim, label, section = simulation(args, threads)
+    if args.stages:
+        section += "-stages"
     counts = capped_steps(sim, args.window)        # the window profile() times
     result = dict(profile(sim, args.window), capped=counts)
     publish(report(args, label, result), section, args.write)
@@ -176,7 +187,8 @@ def simulation(args, threads) -> tuple:
     """(Simulation at the window's start, its label in the report, the report's section)
     of the command line's run."""
     if args.silo:
-        return silo_simulation(args.tuning), "Silo discharge (tools/peer_lammps_silo.py's)", "profile-silo"
+        tuning = args.tuning + (["staged_solve=True"] if args.stages else [])
+        return silo_simulation(tuning), "Silo discharge (tools/peer_lammps_silo.py's)", "profile-silo"
     if args.silo_large:
         import silo_large  # noqa: E402  (tools/silo_large.py)
         a = silo_large.parser().parse_args(["--count", str(args.silo_large),
@@ -190,7 +202,7 @@ def simulation(args, threads) -> tuple:
                             precision=args.precision, threads=threads)
         return sim, f"Gas of {args.gas} spheres (tools/bench.py's)", f"profile-gas-{args.arch}"
     sim = ts.Simulation(ts.load_scene(args.scene), arch=args.arch, precision=args.precision,
-                        threads=threads)
+                        threads=threads, tuning=Tuning().with_(staged_solve=args.stages))
     sim.advance_to(args.at)
     name = os.path.splitext(os.path.basename(args.scene))[0]
     section = f"profile-{name}" + ("" if args.arch == "cpu" else f"-{args.arch}")

@@ -67,7 +67,11 @@ from .position_energy import PositionEnergy
 from .warm_energy import WarmStartEnergy
 from .warm_table import WarmTable
 
-__all__ = ["ContactSolver"]
+__all__ = ["ContactSolver", "SOLVE_STAGES"]
+
+#: the stages of a serial solve, in order (ContactSolver.solve_stage)
+SOLVE_STAGES = ("gather", "list_cells", "prepare", "warm_start", "velocity_sweeps",
+                "position_targets", "position_sweeps", "finish")
 
 
 
@@ -238,13 +242,15 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         (pgs.batched_sweep; sweeps_per_wait on the CPU, gpu_sweeps_per_wait on a GPU);
         and those that choose the variant of the sweeping kernels it launches
         (config.KERNEL_VARIANTS, each variant built on first use: _serial_solve,
-        _sweep): the cells one thread sweeps interleaved (pgs.sweep_cells). Serial
+        _sweep): whether the serial solve launches in stages (staged_solve), and the
+        cells one thread sweeps interleaved (pgs.sweep_cells). Serial
         sweeps, and parallel ones on a one-thread runtime, take
         Performance.solver_interleave (frictional_interleave with friction), parallel
         ones on several threads parallel_interleave; a GPU hides latency with more
         threads instead (one cell each)."""
         self.serial_solver_below = perf.serial_solver_below
         self.batch = perf.sweeps_per_wait if self.cpu else perf.gpu_sweeps_per_wait
+        self.solve_in_stages = perf.staged_solve
         cfg = ti.lang.impl.current_cfg()
         one_thread = perf.frictional_interleave if self.f.friction else perf.solver_interleave
         self.interleave = one_thread if self.cpu else 1
@@ -448,6 +454,37 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
                     speed2 = ti.max(speed2, self.state.v[b].norm_sqr())
                 ti.atomic_max(self.params.vmax2_near[None], speed2)
 
+    @ti.func
+    def solve_stage(self, stage: ti.template()):
+        """Stage ``stage`` of the serial solve (SOLVE_STAGES; kernel top level): the
+        rows gathered, the cells that own them listed, their geometry, targets and warm
+        impulses prepared, the warm start applied, the velocity sweeps, the position
+        targets, the position sweeps, and the finish."""
+        if ti.static(stage == 0):
+            self.set_tolerances()
+            self.gather()
+        elif ti.static(stage == 1):
+            self.list_active_cells()
+        elif ti.static(stage == 2):
+            self.prepare_rows()
+        elif ti.static(stage == 3):
+            self.warm_start_serially()
+            if ti.static(self.bounded_warm_start):
+                self.bound_warm_start()
+        elif ti.static(stage == 4):
+            self.params.contact_iterations[None] = self.iterate_serially(
+                VELOCITY, self.cap_v, self.plain_v, self.tol_v)
+            self.params.contact_residual[None] = self.residual[None]
+        elif ti.static(stage == 5):
+            if ti.static(self.shock):
+                self.shock_pass()
+            self.position_targets()
+        elif ti.static(stage == 6):
+            self.params.position_iterations[None] = self.iterate_serially(
+                POSITION, self.cap_w, self.plain_w, self.tol_w)
+        else:
+            self.finish()
+
     def _build_kernels(self):
         """The kernels solve() launches (plain closures: no per-launch `self` dispatch)."""
         params = self.params
@@ -457,23 +494,25 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             it compiles: _serial_solve keeps one per interleave)."""
             @ti.kernel
             def solve_serial():
-                self.set_tolerances()
-                self.gather()
-                self.list_active_cells()
-                self.prepare_rows()
-                self.warm_start_serially()
-                if ti.static(self.bounded_warm_start):
-                    self.bound_warm_start()
-                params.contact_iterations[None] = self.iterate_serially(
-                    VELOCITY, self.cap_v, self.plain_v, self.tol_v)
-                params.contact_residual[None] = self.residual[None]
-                if ti.static(self.shock):
-                    self.shock_pass()
-                self.position_targets()
-                params.position_iterations[None] = self.iterate_serially(
-                    POSITION, self.cap_w, self.plain_w, self.tol_w)
-                self.finish()
+                for stage in ti.static(range(len(SOLVE_STAGES))):
+                    self.solve_stage(stage)
             return solve_serial
+
+        def staged_solve_kernels():
+            """The same solve as one kernel per stage (SOLVE_STAGES, each named
+            ``solve_<stage>``), launched in turn: Performance.staged_solve, for
+            profiles that show each stage's time."""
+            def stage_kernel(stage):
+                def body():
+                    self.solve_stage(stage)
+                body.__name__ = "solve_" + SOLVE_STAGES[stage]
+                return ti.kernel(body)
+            kernels = [stage_kernel(stage) for stage in range(len(SOLVE_STAGES))]
+
+            def launch_stages():
+                for kernel in kernels:
+                    kernel()
+            return launch_stages
 
         @ti.kernel
         def start() -> ti.i32:
@@ -502,6 +541,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             self.finish()
 
         self._serial_solve_kernel = serial_solve_kernel
+        self._staged_solve_kernels = staged_solve_kernels
         self._serial_solves = {}
         self._start, self._middle, self._end = start, middle, end
         self._bound_warm = bound_warm
@@ -540,11 +580,14 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self._sweeps = {}
 
     def _serial_solve(self):
-        """The one-launch solve kernel of the bound interleave (built once per
-        interleave: load_host_options)."""
-        if self.interleave not in self._serial_solves:
-            self._serial_solves[self.interleave] = self._serial_solve_kernel()
-        return self._serial_solves[self.interleave]
+        """The one-launch solve kernel of the bound interleave, or with
+        Performance.staged_solve its stages one kernel each (built once per interleave
+        and staging: load_host_options)."""
+        key = (self.interleave, self.solve_in_stages)
+        if key not in self._serial_solves:
+            self._serial_solves[key] = (self._staged_solve_kernels() if self.solve_in_stages
+                                        else self._serial_solve_kernel())
+        return self._serial_solves[key]
 
     def _sweep(self, mode, batched=None):
         """The one-sweep kernel of ``mode`` for the bound colour count and parallel
