@@ -5,8 +5,9 @@ TAICHI_SPHERES_FAILURE_LOG names a file that gets each failure's report at once;
 ``--compile`` how Taichi compiles (default fast: same bits, ~3x shorter compiles, which
 are most of the suite's time; see taichi_spheres/runtime.py COMPILE_MODES).
 Tests marked ``own_runtime`` initialise Taichi with settings of their own (thread
-counts, precision, compile mode) and run last: a test that does so unmarked makes the
-tests after it in its worker compile their engines again (docs/bench.md, "Test suite").
+counts, precision, compile mode) and run between the f64 and the f32 tests: a test
+that does so unmarked makes the tests after it in its worker compile their engines
+again (docs/bench.md, "Test suite").
 Tolerances depend on precision: ``tol`` scales a relative tolerance by the machine
 epsilon of the precision under test.
 """
@@ -52,12 +53,14 @@ def _runs_f32(item) -> bool:
 
 
 def pytest_collection_modifyitems(config, items):
-    # f64 tests first, then f32, then those that initialise Taichi their own way
-    # (own_runtime: other thread counts, precision or compile mode): a process has one
+    # f64 tests first, then those that initialise Taichi their own way (own_runtime:
+    # other thread counts, precision or compile mode), then f32: a process has one
     # Taichi runtime, so each switch re-initialises it and drops every compiled engine
-    # (taichi_spheres/engine.py), and the tests after it would compile theirs again
-    items.sort(key=lambda item: (item.get_closest_marker("own_runtime") is not None,
-                                 _runs_f32(item)))
+    # (taichi_spheres/engine.py), and the tests after it would compile theirs again.
+    # Between the two precisions the f32 tests re-initialise anyway, and a test that
+    # asks for the f64 runtime's own thread count still finds its engines
+    items.sort(key=lambda item: (_runs_f32(item),
+                                 item.get_closest_marker("own_runtime") is not None))
     if config.getoption("--slow"):
         return
     skip = pytest.mark.skip(reason="slow validation run: use --slow")

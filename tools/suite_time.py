@@ -5,11 +5,19 @@ time; with ``--write`` puts them into docs/bench.md (its own section).
 
     python tools/suite_time.py            # one run of make test (docs/bench.md "Test suite": its time)
     python tools/suite_time.py --write
+    python tools/suite_time.py --census   # and count the engines the tests compile
+
+With ``--census`` each worker logs every engine the tests build (tools/
+engine_census_plugin.py), and the report says how many, of how many kinds, how many
+were built again in one worker (after Taichi was initialised again, or for more room)
+and which test files built most: most of the suite's time is compiling them.
 """
 from __future__ import annotations
 
 import argparse
+import collections
 import datetime
+import json
 import os
 import platform
 import re
@@ -22,13 +30,15 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.join(HERE, "..")
 sys.path.insert(0, HERE)
 from machine import cpu_name, kernel_cache_env, publish  # noqa: E402  (tools/machine.py)
+from engine_census_plugin import CENSUS_ENV  # noqa: E402
 
 
-def run_suite() -> tuple:
-    """(pytest's summary line, wall seconds, exit code) of ``make test``; pytest's
-    FAILED and ERROR lines go to stderr."""
+def run_suite(**extra: str) -> tuple:
+    """(pytest's summary line, wall seconds, exit code) of ``make test`` with the
+    environment variables ``extra`` set too; pytest's FAILED and ERROR lines go to
+    stderr."""
     with tempfile.TemporaryDirectory() as cache:
-        env = kernel_cache_env(cache)
+        env = kernel_cache_env(cache, **extra)
         t0 = time.perf_counter()
         out = subprocess.run(["make", "test"], cwd=ROOT, env=env, capture_output=True,
                              text=True)
@@ -41,18 +51,53 @@ def run_suite() -> tuple:
     return (summary[-1].strip("= ") if summary else "no summary"), seconds, out.returncode
 
 
+def census_env(log_dir: str) -> dict:
+    """The environment variables that load tools/engine_census_plugin.py into make
+    test's pytest workers, logging into ``log_dir``."""
+    path = os.pathsep.join(p for p in (HERE, os.environ.get("PYTHONPATH", "")) if p)
+    opts = " ".join(o for o in (os.environ.get("PYTEST_ADDOPTS", ""), "-p engine_census_plugin")
+                    if o)
+    return {"PYTHONPATH": path, "PYTEST_ADDOPTS": opts, CENSUS_ENV: log_dir}
+
+
+def census(log_dir: str) -> str:
+    """The report on the engines logged in ``log_dir`` (one .jsonl file per worker)."""
+    per_worker = {}
+    for name in sorted(os.listdir(log_dir)):
+        with open(os.path.join(log_dir, name), encoding="utf-8") as src:
+            per_worker[name[:-len(".jsonl")]] = [json.loads(line) for line in src]
+    rows = [row for worker in per_worker.values() for row in worker]
+    kinds = {row["kind"] for row in rows}
+    again = sum(len(worker) - len({row["kind"] for row in worker})
+                for worker in per_worker.values())
+    files = collections.Counter(row["test"].split("::")[0] for row in rows)
+    top = ", ".join(f"{name} {count}" for name, count in files.most_common(8))
+    shared = len(rows) - again - len(kinds)
+    return (f"Engines built (`--census`): {len(rows)} in {len(per_worker)} workers "
+            f"({', '.join(str(len(w)) for w in per_worker.values())}), {len(kinds)} kinds; "
+            f"{again} of them a kind their worker had built before (Taichi initialised "
+            f"again, or more room), {shared} a kind another worker built too. Most by "
+            f"test file: {top}.\n")
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--write", action="store_true", help="write the result into docs/bench.md")
+    p.add_argument("--census", action="store_true",
+                   help="also count the engines the tests build (tools/engine_census_plugin.py)")
     args = p.parse_args(argv)
-    summary, seconds, code = run_suite()
+    with tempfile.TemporaryDirectory() as log_dir:
+        summary, seconds, code = run_suite(**(census_env(log_dir) if args.census else {}))
+        counted = census(log_dir) if args.census else ""
     text = f"""## Test suite
 
-Generated {datetime.date.today().isoformat()} by `python tools/suite_time.py{' --write' if args.write else ''}` on {cpu_name()}, {os.cpu_count()} cores, Python {platform.python_version()}:
+Generated {datetime.date.today().isoformat()} by `python tools/suite_time.py{' --census' if args.census else ''}{' --write' if args.write else ''}` on {cpu_name()}, {os.cpu_count()} cores, Python {platform.python_version()}:
 `make test` (CPU backend, the Makefile's pytest-xdist workers, fast compile mode) with an
 empty Taichi kernel cache, as CI runs it: **{seconds / 60:.1f} min** ({seconds:.0f} s),
 {summary}.
 """
+    if counted:
+        text += "\n" + counted
     publish(text, "test-suite", args.write and code == 0)
     return code
 
