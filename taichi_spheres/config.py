@@ -5,10 +5,11 @@
 results (impact threshold, contact solver tolerances, collapse rule, wall bounces);
 the *performance*
 knobs change only speed and memory (loop variants, list sizes, grid shape): the same
-bits whatever their values (tests run both sides of each). Kernels compile the values
+bits whatever their values (tests run both sides of each). Kernels compile most values
 in (``ti.static``), so Simulations with other values run on another engine
-(engine.py). ``Tuning().with_(dense_touched=64)`` returns a copy with fields of
-either group replaced by name.
+(engine.py), except the values no kernel compiles in (``Tuning.compiled``: HOST_ONLY,
+KERNEL_VARIANTS and SOLVER_VALUES, below). ``Tuning().with_(dense_touched=64)``
+returns a copy with fields of either group replaced by name.
 """
 from __future__ import annotations
 
@@ -307,8 +308,9 @@ HOST_ONLY = ("serial_light_below", "serial_heavy_below", "near_lists_from", "few
              "gpu_sweeps_per_wait", "discharge_in_place")
 #: Performance options that choose among variants of a few of an engine's kernels, each
 #: variant built on first use by the Simulation bound to the engine (the contact
-#: solver's sweeping kernels: ContactSolver.load_host_options): Simulations that differ
-#: only in them share an engine, and each variant compiles only those kernels
+#: solver's sweeping kernels by their interleaving, and its serial solve as one kernel
+#: or one per stage: ContactSolver.load_host_options): Simulations that differ only in
+#: them share an engine, and each variant compiles only those kernels
 KERNEL_VARIANTS = ("solver_interleave", "frictional_interleave", "parallel_interleave",
                    "staged_solve")
 #: Rules the contact solver's kernels read as values in fields, loaded when a

@@ -66,7 +66,7 @@ class Runtime:
     arch: str          # what was asked: cpu|gpu|cuda|vulkan|metal
     actual: str        # what Taichi runs on: x64|arm64|cuda|vulkan|metal|...
     precision: str     # f32|f64 (Taichi's default_fp)
-    threads: int | None   # CPU threads (asked for, else Taichi's default); None on GPUs
+    threads: int | None   # CPU threads: asked for, else Taichi's default (a GPU: as asked)
     generation: int
     compile: str = "optimized"   # COMPILE_MODES key
 

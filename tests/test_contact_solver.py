@@ -409,6 +409,7 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
         configs += ((0, 3, 1), (0, 1, 7))
     elif "bounded" not in case:
         configs += ((0, 8, 4),)     # a batch of 4 does not divide the cap of 15
+    solvers = {}
     for below, interleave, batch in configs:
         sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(
             serial_heavy_below=below, serial_solver_below=below, solver_interleave=interleave,
@@ -427,6 +428,14 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
         assert sim.stats["contacts"] > 0
         out.append(observe.state_digest(sim.state(), sim.precision))
         sweeps.append(counts)
+        solvers.setdefault(below, set()).add(sim.debug_view().solver)
+    # the configurations of one path share its engine; on the CPU each interleaving of
+    # the parallel path launched sweep kernels of its own (ContactSolver._sweep)
+    assert all(len(same) == 1 for same in solvers.values())
+    parallel = {interleave for below, interleave, _ in configs if below == 0}
+    if arch == "cpu":
+        (solver,) = solvers[0]
+        assert {key[3] for key in solver._sweeps} == parallel
     if "scaled" in case:   # the scaled caps bound solves (ceil(15 x 0.2) is 3, or 4 by round-off)
         assert sweeps[0][0][0] > 4      # but not the first, cold one (no warm start)
         assert any(vel == 3 for vel, _ in sweeps[0][3::3])
@@ -698,7 +707,9 @@ def test_max_overlap_counts_pairs_and_walls_without_rows(arch, precision, subste
 def test_staged_solve_keeps_the_bits_of_one_launch(arch):
     """Performance.staged_solve launches the serial solve one kernel per stage
     (contacts/solver.py SOLVE_STAGES, for profiles): the same state and counters as
-    the one launch, on the same engine."""
+    the one launch, on the same engine (CPU: a GPU's solve is never serial)."""
+    if arch != "cpu":
+        pytest.skip("the serial solve runs on the CPU")
     scene = fcc_block(3)
     runs = []
     for staged in (False, True):

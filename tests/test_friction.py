@@ -237,20 +237,21 @@ def test_frictional_pile_energy_is_booked_and_settles(arch, mu_r):
 @pytest.mark.own_runtime
 def test_friction_same_bits_for_any_thread_count(arch):
     """The frictional solve gives the same bits on 1 and 2 threads, and with one cell
-    per sweep loop iteration or several interleaved (Performance.solver_interleave)
+    per sweep loop iteration or several interleaved (Performance.frictional_interleave)
     (CPU properties)."""
     if arch != "cpu":
         pytest.skip("thread counts are a CPU setting")
     digests = []
-    # (2 threads first: on 2 cores the runtime the tests before left; then the two
-    # interleavings on one runtime: they share its engine, each its own solve kernel)
+    # (2 threads first: a runtime with Taichi's default count on 2 cores is kept; then
+    # the two interleavings on one runtime: one engine, a solve kernel each)
     for threads, interleave in ((2, 8), (1, 8), (1, 1)):
         sim = ts.Simulation(_pile(), arch=arch, precision="f64", threads=threads,
-                            tuning=Tuning().with_(solver_interleave=interleave))
+                            tuning=Tuning().with_(frictional_interleave=interleave))
         sim.advance(0.3)
         st = sim.state()
         digests.append((observe.state_digest(st, "f64"), st.omega.tobytes()))
     assert digests[0] == digests[1] == digests[2]
+    assert {key[0] for key in sim.debug_view().solver._serial_solves} == {8, 1}
 
 
 def _silo(hole, mu=0.5, recycle=False, n_side=5):

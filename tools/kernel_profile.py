@@ -44,7 +44,7 @@ import taichi as ti  # noqa: E402
 from taichi.profiler.kernel_profiler import get_default_kernel_profiler  # noqa: E402
 
 import taichi_spheres as ts  # noqa: E402
-from taichi_spheres.config import Tuning  # noqa: E402
+from taichi_spheres.config import DEFAULT  # noqa: E402
 from taichi_spheres import runtime  # noqa: E402
 from machine import hardware, publish, untimed_pass  # noqa: E402
 
@@ -201,8 +201,11 @@ def simulation(args, threads) -> tuple:
         sim = ts.Simulation(gas(args.gas, packing=0.3, periodic=True, seed=0), arch=args.arch,
                             precision=args.precision, threads=threads)
         return sim, f"Gas of {args.gas} spheres (tools/bench.py's)", f"profile-gas-{args.arch}"
-    sim = ts.Simulation(ts.load_scene(args.scene), arch=args.arch, precision=args.precision,
-                        threads=threads, tuning=Tuning().with_(staged_solve=args.stages))
+    scene = ts.load_scene(args.scene)
+    tuning = DEFAULT.with_(**scene.meta.get("tuning", {}), staged_solve=True) if args.stages \
+        else None                  # (None: the scene file's [tuning], as Simulation reads it)
+    sim = ts.Simulation(scene, arch=args.arch, precision=args.precision, threads=threads,
+                        tuning=tuning)
     sim.advance_to(args.at)
     name = os.path.splitext(os.path.basename(args.scene))[0]
     section = f"profile-{name}" + ("" if args.arch == "cpu" else f"-{args.arch}")

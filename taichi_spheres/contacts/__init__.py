@@ -205,9 +205,9 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
 
     def bind(self, scene, geom, perf: Performance):
         """Load what the kernels read of a scene and its grid geometry ``geom`` (after
-        state.bind and grid.bind), and the bound Simulation's host-only options ``perf``
-        (config.Performance: the sweep's path, sweep); forget the near lists and any
-        pending pairs."""
+        state.bind and grid.bind), and the bound Simulation's options ``perf``
+        (config.Performance: few_pairs and serial_resolve_pairs choose the path of
+        sweep); forget the near lists and any pending pairs."""
         self.host = perf
         self.bind_scalars(scene, geom)
         self.forget()
