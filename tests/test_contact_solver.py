@@ -430,12 +430,13 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
         sweeps.append(counts)
         solvers.setdefault(below, set()).add(sim.debug_view().solver)
     # the configurations of one path share its engine; on the CPU each interleaving of
-    # the parallel path launched sweep kernels of its own (ContactSolver._sweep)
+    # the parallel path launched sweep kernels of its own (ContactSolver._sweep; the
+    # engine may hold an earlier case's too: the sweep caps are values in fields)
     assert all(len(same) == 1 for same in solvers.values())
     parallel = {interleave for below, interleave, _ in configs if below == 0}
     if arch == "cpu":
         (solver,) = solvers[0]
-        assert {key[3] for key in solver._sweeps} == parallel
+        assert parallel <= {key[3] for key in solver._sweeps}
     if "scaled" in case:   # the scaled caps bound solves (ceil(15 x 0.2) is 3, or 4 by round-off)
         assert sweeps[0][0][0] > 4      # but not the first, cold one (no warm start)
         assert any(vel == 3 for vel, _ in sweeps[0][3::3])
