@@ -135,11 +135,11 @@ def test_discharge_in_place_keeps_the_bits_of_a_reload_in_f32(arch):
 def test_host_only_options_share_the_compiled_engine(arch):
     """The options only the host reads (config.HOST_ONLY: the schedule's sphere counts,
     the impact sweep's and the contact solve's paths, sweeps per wait,
-    discharge_in_place) and those that choose a variant of the solver's sweeping
-    kernels (config.KERNEL_VARIANTS: the interleaving) are left out of the engines'
-    key: Simulations that differ only in them run on one engine, and the engine's parts
-    read each one's own options while it is bound (Engine.bind), the solver launching
-    the kernel variant of its interleaving."""
+    discharge_in_place) and those that choose a variant of the solver's kernels
+    (config.KERNEL_VARIANTS: the interleaving, the staged solve) are left out of the
+    engines' key: Simulations that differ only in them run on one engine, and the
+    engine's parts read each one's own options while it is bound (Engine.bind), the
+    solver launching the kernel variant of its interleaving and staging."""
     scene, tuning = _silo()
     host = dict(discharge_in_place=False, few_pairs=7, serial_resolve_pairs=9,
                 serial_solver_below=5, sweeps_per_wait=3, gpu_sweeps_per_wait=5,
