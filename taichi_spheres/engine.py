@@ -7,9 +7,9 @@ are data in those fields, and only what changes the code is compiled in: the
 features (``state.Features``), the serial/parallel loop variants chosen by the
 sphere count, near lists, and the options (``config.Tuning.compiled``: less those only
 the host reads, those that choose a variant of the contact solver's sweeping kernels
-(built on first use), and the contact solver's sweep rules, which are data too). A Simulation asks the
-pool for an engine with its key and room for its spheres and cells; a later
-Simulation with the same key and no more spheres or cells runs on the same engine
+(built on first use), and the contact solver's sweep rules, which are data too). A
+Simulation asks the pool for an engine with its key and room for its spheres and
+cells; a later Simulation with the same key and no more spheres or cells runs on the same engine
 and compiles nothing (``tools/compile_once.py`` measures it).
 
 Several live Simulations may share one engine: the one that runs binds the engine

@@ -107,10 +107,10 @@ def ensure(arch: str = "cpu", precision: str | None = None, threads: int | None 
     """Initialise Taichi for (arch, precision, threads, compile mode) unless it already
     is; return it. threads None: any thread count if the current runtime fits, else
     Taichi's default (a CPU runtime started with the default keeps the count it got,
-    so that asking for that count later keeps it); compile None: the current runtime's mode, also when Taichi is
-    re-initialised for another arch or precision (for the first runtime,
-    TAICHI_SPHERES_COMPILE's, else "optimized"). A re-initialisation makes earlier
-    Simulations stale (see check)."""
+    so that asking for that count later keeps it); compile None: the current
+    runtime's mode, also when Taichi is re-initialised for another arch or precision
+    (for the first runtime, TAICHI_SPHERES_COMPILE's, else "optimized"). A
+    re-initialisation makes earlier Simulations stale (see check)."""
     global _current, _generation
     if compile is not None and compile not in COMPILE_MODES:
         raise ValueError(f"compile must be one of {', '.join(COMPILE_MODES)}, got {compile!r}")

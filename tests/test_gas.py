@@ -83,7 +83,8 @@ def test_bits_do_not_depend_on_thread_count(arch):
         pytest.skip("thread count is a CPU setting")
     scene = gas(4000, packing=0.3, periodic=True, seed=2)   # large enough for parallel loops
     out = []
-    for threads in (2, 1):      # (2 first: a runtime with Taichi's default count on 2 cores is kept)
+    # (2 first: a runtime with Taichi's default count on 2 cores is kept)
+    for threads in (2, 1):
         sim = ts.Simulation(scene, arch=arch, threads=threads)
         sim.advance(0.3)
         out.append(sim.state())

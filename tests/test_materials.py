@@ -186,7 +186,8 @@ def test_two_material_pile_same_bits_for_any_thread_count(arch):
     if arch != "cpu":
         pytest.skip("thread counts are a CPU setting")
     digests = []
-    for threads in (2, 1):      # (2 first: a runtime with Taichi's default count on 2 cores is kept)
+    # (2 first: a runtime with Taichi's default count on 2 cores is kept)
+    for threads in (2, 1):
         sim = ts.Simulation(_two_material_pile(), arch=arch, precision="f64", threads=threads)
         sim.advance(0.2)
         digests.append((sim.state().x.tobytes(), sim.state().omega.tobytes()))
