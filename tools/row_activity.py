@@ -104,7 +104,8 @@ def measure(scene: str, at: float, threshold: float) -> dict:
     three ways (module docstring)."""
     p = capture(scene, at, changes={})
     # the defaults the capture ran with, at the cap it was given
-    prob, rules = Problem(p), dataclasses.replace(Rules(), contact_iterations=p["sweeps"])
+    prob, rules = Problem(p), dataclasses.replace(Rules(), contact_iterations=p["sweeps"],
+                                                plain_sweeps=p["plain"])
     plain = replay(prob, rules, p["tol"])
     exact = replay(prob, rules, p["tol"], "exact")
     rough = replay(prob, rules, p["tol"], "threshold", threshold)

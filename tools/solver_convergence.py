@@ -98,9 +98,9 @@ def capture(scene_path: str, at: float, changes=None) -> dict:
     box = {}
     inner = solver._iterate
 
-    def grab(mode, cap, tol):
+    def grab(mode, cap, last, tol):
         if mode != VELOCITY or "rows" in box:
-            return inner(mode, cap, tol)
+            return inner(mode, cap, last, tol)
         n, k = solver.n_rows[None], scene.n
         start = solver.cell_start.to_numpy()
         cells = solver.active_cells.to_numpy()[:solver.colour_active[solver.n_colours]]
@@ -111,10 +111,10 @@ def capture(scene_path: str, at: float, changes=None) -> dict:
                            lam=solver.lam.to_numpy()[:n], v=solver.state.v.to_numpy()[:k],
                            x=solver.state.x.to_numpy()[:k],
                            inv_mass=1.0 / np.asarray(scene.mass, dtype=np.float64),
-                           h=float(solver.params.h[None]), sweeps=cap,
-                           tol=float(tol[None]))
+                           h=float(solver.params.h[None]), sweeps=int(cap[None]),
+                           plain=int(last[None]), tol=float(tol[None]))
         t0 = time.perf_counter()
-        done = inner(mode, cap, tol)
+        done = inner(mode, cap, last, tol)
         box["rows"]["engine_seconds"] = time.perf_counter() - t0
         box["rows"]["engine_v"] = solver.state.v.to_numpy()[:k]
         box["rows"]["engine_sweeps"] = done
