@@ -32,6 +32,8 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (step_overlaps, ["--variants", "fast=relax=1.8"], "unknown tuning field 'relax'"),
     (settings_tradeoff, ["--variants", "=relaxation=1.8"], "a variant is NAME=FIELD=VALUE"),
     (settings_tradeoff, ["--fills", "-1"], "--fills must be >= 0"),
+    (settings_tradeoff, ["--variants", "long=step_fraction=1.5"],
+     "variant 'long': step_fraction must be in (0, 1], got 1.5"),
     (silo_overlaps, ["--first", "0"], "--first must be >= 1"),
     (row_activity, ["--at", "-1"], "--at times must be >= 0"),
     (row_activity, ["--threshold", "1"], "--threshold must be in [0, 1)"),
@@ -219,3 +221,18 @@ def test_direct_solve_reports_a_singular_block():
     assert solver_convergence.active_set_solve(W, prob.linear, both, 0.0)[4] == "singular"
     lam, solves, _, _, done = solver_convergence.active_set_solve(W, prob.linear, both, 1e-9)
     assert done == "yes" and lam.sum() == pytest.approx(1.0, rel=1e-6)
+
+
+def test_variants_may_set_the_step_fraction():
+    """A variant's step_fraction goes to the Simulation, its other fields to Tuning, and
+    the table says so."""
+    from taichi_spheres.config import Tuning
+    name, changes = step_overlaps.parse_variant("long=step_fraction=0.2 position_iterations=100")
+    assert name == "long"
+    options = step_overlaps.simulation_options(changes)
+    assert options == dict(step_fraction=0.2, tuning=Tuning().with_(position_iterations=100))
+    assert step_overlaps.simulation_options({"relaxation": 1.5}) == \
+        dict(tuning=Tuning().with_(relaxation=1.5))
+    assert step_overlaps.variant_text(changes) == \
+        "step_fraction=0.2, tuning=Tuning().with_(position_iterations=100)"
+    assert step_overlaps.variant_text({"relaxation": 1.5}) == "Tuning().with_(relaxation=1.5)"

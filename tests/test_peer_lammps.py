@@ -89,7 +89,7 @@ def _scene_args(*extra):
     args = argparse.Namespace(scene=POUR, phases=None, threads=None, out=None,
                               lammps_threads=1, young=5e9, poisson=0.3, dt=5e-6,
                               overlap_every=10, only="taichi", lammps_json=None,
-                              tuning=None)
+                              tuning=None, step_fraction=None)
     for key, value in extra:
         setattr(args, key, value)
     return args, ap
@@ -115,6 +115,23 @@ def test_rerun_command_keeps_the_report_file_and_tuning():
     assert peer_lammps.rerun_command(args).endswith(
         "--only taichi --out docs/peer_lammps_pour_fast.md --tuning contact_iterations=40 "
         "shock_propagation=on")
+
+
+def test_step_fraction_goes_to_the_simulation_and_the_rerun_command():
+    """--step-fraction: in (0, 1], with --out (the default report is the defaults'), in
+    the report's rerun command; without --scene an error."""
+    args, ap = _scene_args(("step_fraction", 0.15), ("out", "docs/peer_lammps_pour_sf.md"))
+    peer_lammps.scene_args(args, ap)
+    assert peer_lammps.rerun_command(args).endswith(
+        "--only taichi --out docs/peer_lammps_pour_sf.md --step-fraction 0.15")
+    assert peer_lammps.step_fraction_text(0.15) == ", step_fraction 0.15"
+    assert peer_lammps.step_fraction_text(None) == ""
+    for bad in ((("step_fraction", 1.5), ("out", "x.md")), (("step_fraction", 0.15),)):
+        args, ap = _scene_args(*bad)
+        with pytest.raises(SystemExit):
+            peer_lammps.scene_args(args, ap)
+    with pytest.raises(SystemExit):
+        peer_lammps.main(["--step-fraction", "0.15", "--no-write"])
 
 
 def test_saved_run_needs_the_same_scene(tmp_path):

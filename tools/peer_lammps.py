@@ -427,8 +427,10 @@ def phase_row(x, v, m, radius, scene, t_end, wall, t_prev, steps):
                 steps=int(steps))
 
 
-def run_taichi_scene(scene, phases, threads, warm_t=None, fused=True, tuning=None):
-    """taichi_spheres (cpu, f64, `threads` threads; ``tuning``: Tuning.with_ changes)
+def run_taichi_scene(scene, phases, threads, warm_t=None, fused=True, tuning=None,
+                     step_fraction=None):
+    """taichi_spheres (cpu, f64, `threads` threads; ``tuning``: Tuning.with_ changes;
+    ``step_fraction``: the Simulation's, None for its default)
     over [0, T1], [T1, T2] (phases [s]), after an untimed warm-up to warm_t [s] and a
     rewind to t = 0 (as run_taichi: default T2 with the fused step, else T1); rows as
     phase_row plus sim.stats' STAT_KEYS."""
@@ -436,7 +438,8 @@ def run_taichi_scene(scene, phases, threads, warm_t=None, fused=True, tuning=Non
     from taichi_spheres.config import Tuning
     t = time.perf_counter()
     sim = ts.Simulation(scene, arch="cpu", threads=threads, fused=fused,
-                        tuning=Tuning().with_(**(tuning or {})))
+                        tuning=Tuning().with_(**(tuning or {})),
+                        **({} if step_fraction is None else {"step_fraction": step_fraction}))
     if warm_t is None:
         warm_t = phases[-1] if sim.fused else phases[0]
     ckpt0 = sim.checkpoint()
@@ -605,6 +608,9 @@ def build_parser():
     ap.add_argument("--tuning", nargs="+", default=None, metavar="NAME=VALUE",
                     help="with --scene: taichi_spheres runs with Tuning().with_(NAME=VALUE, "
                          "...) (e.g. relaxation=1.8 contact_iterations=40)")
+    ap.add_argument("--step-fraction", type=float, default=None,
+                    help="with --scene: taichi_spheres runs with Simulation(step_fraction=...) "
+                         "(default: the Simulation's, 0.1)")
     ap.add_argument("--only", choices=("both", "taichi", "lammps"), default="both")
     ap.add_argument("--lammps-json", default=None, metavar="FILE",
                     help="with --only lammps: save the LAMMPS result to FILE; otherwise: "
@@ -627,6 +633,8 @@ def main(argv=None):
         ap.error("--phases needs --scene")
     if args.tuning:
         ap.error("--tuning needs --scene")
+    if args.step_fraction is not None:
+        ap.error("--step-fraction needs --scene")
     if args.threads is None:
         args.threads = 2
     if args.out is None:
@@ -873,6 +881,12 @@ def scene_args(args, ap):
     args.tuning = tuning_args(args.tuning, ap)
     if args.tuning and args.out is None:
         ap.error("--tuning needs --out: the default report is for the default settings")
+    if args.step_fraction is not None:
+        if not 0 < args.step_fraction <= 1:
+            ap.error(f"--step-fraction must be in (0, 1], got {args.step_fraction:g}")
+        if args.out is None:
+            ap.error("--step-fraction needs --out: the default report is for the default "
+                     "settings")
     args.phases = scene_phases(args, scene, ap)
     args.scene_file = os.path.relpath(os.path.abspath(args.scene), os.path.abspath(ROOT))
     args.scene_digest = scene_digest(scene)
@@ -926,7 +940,7 @@ def main_scene(args, ap):
     results, overlap = [], None
     if args.only in ("both", "taichi"):
         results.append(run_taichi_scene(scene, args.phases, args.threads, args.warm,
-                                        not args.no_fused, args.tuning))
+                                        not args.no_fused, args.tuning, args.step_fraction))
         print(fmt_scene_table(results[-1:], args.phases), flush=True)
         print(fmt_stats_table(results[-1], args.phases), flush=True)
     if saved is not None:
@@ -996,6 +1010,11 @@ def lammps_scene_text(args, scene):
             f"{tc * 1e6:.0f} µs, {tc / args.dt:.0f} steps of {args.dt:g} s.")
 
 
+def step_fraction_text(step_fraction) -> str:
+    """', step_fraction X' for the report, or '' for the Simulation's default."""
+    return "" if step_fraction is None else f", step_fraction {step_fraction:g}"
+
+
 def tuning_text(tuning) -> str:
     """', with Tuning().with_(...)' for the report, or '' for the defaults."""
     if not tuning:
@@ -1024,7 +1043,8 @@ def scene_header_lines(args, results, elapsed, saved, loads):
         f"taichi_spheres on Taichi {'.'.join(map(str, ti.__version__))}, arch cpu, f64, "
         f"{args.threads} thread{'s' if args.threads > 1 else ''}"
         f"{', ' + fused_text(ts_r, args.no_fused) if ts_r else ''}"
-        f"{tuning_text(args.tuning) if ts_r else ''}; {lammps_version}, "
+        f"{tuning_text(args.tuning) if ts_r else ''}"
+        f"{step_fraction_text(args.step_fraction) if ts_r else ''}; {lammps_version}, "
         f"{lammps_threads_text(args.lammps_threads)}.",
         "",
     ]
@@ -1081,6 +1101,8 @@ def rerun_command(args) -> str:
         cmd += f" --lammps-json {args.lammps_json}"
     if os.path.abspath(args.out) != args.default_out:
         cmd += f" --out {os.path.relpath(os.path.abspath(args.out), os.path.abspath(ROOT))}"
+    if args.step_fraction is not None:
+        cmd += f" --step-fraction {args.step_fraction:g}"
     if args.tuning:
         cmd += " --tuning " + " ".join(f"{k}={v}" for k, v in args.tuning.items())
     return cmd

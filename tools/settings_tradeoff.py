@@ -3,7 +3,8 @@
 defaults: the pour's bed (speed, overlaps, kinetic energy) and a heavy ball landing on
 a settled block in a new Simulation (energy growth).
 
-For each named setting (``NAME=FIELD=VALUE ...``, Tuning fields):
+For each named setting (``NAME=FIELD=VALUE ...``: Tuning fields, and the Simulation's
+``step_fraction``):
 
 - the pour (scenes/pour.toml) from 1 s to 2 s on 1 thread, steps one by one
   (tools/step_overlaps.py ``run``): wall s per simulated s of the steps alone, the
@@ -44,9 +45,9 @@ sys.path.insert(0, HERE)
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.builders import fcc_block  # noqa: E402
-from taichi_spheres.config import Tuning  # noqa: E402
 from machine import FORMER_DEFAULTS, cpu_name, publish, tuning_text  # noqa: E402
-from step_overlaps import parse_variant, run  # noqa: E402  (tools/step_overlaps.py)
+from step_overlaps import (parse_variant, run, simulation_options,  # noqa: E402
+                           variant_text)  # (tools/step_overlaps.py)
 from warm_start_energy import drop, settled_block  # noqa: E402
 
 #: --variants default: the former defaults, and over-relaxed sweeps with substeps at
@@ -68,11 +69,12 @@ VARIANTS = [
 FILLS = 8
 
 
-def block_energy_rise(tuning, steps: int = 150) -> float:
-    """The 256-sphere FCC block settling from its lattice under ``tuning``: the largest
-    total energy above the start over ``steps`` steps / the start energy (0 if never)."""
+def block_energy_rise(options: dict, steps: int = 150) -> float:
+    """The 256-sphere FCC block settling from its lattice under Simulation keywords
+    ``options`` (step_overlaps.simulation_options): the largest total energy above the
+    start over ``steps`` steps / the start energy (0 if never)."""
     sim = ts.Simulation(fcc_block((4, 4, 4), radius=0.01, restitution=0.5), threads=1,
-                        tuning=tuning)
+                        **options)
     start = highest = sim.energy_budget()["current"]
     for _ in range(steps):
         sim.advance(sim.max_step())
@@ -81,7 +83,7 @@ def block_energy_rise(tuning, steps: int = 150) -> float:
 
 
 def pour_fills(changes: dict, fills: int) -> dict:
-    """The pour over fills seed = 1..fills under Tuning().with_(**changes): its bed
+    """The pour over fills seed = 1..fills under ``changes`` (simulation_options): its bed
     [1, 2] s (``bed``: summed wall s per simulated s, ``fastest`` and ``slowest`` fill,
     ``steps`` summed), its fall [0, 1] s (``fall``: summed wall s per simulated s) and
     the kinetic energy at 2 s / the initial energy (``kinetic``: one per fill)."""
@@ -95,7 +97,7 @@ def pour_fills(changes: dict, fills: int) -> dict:
             f.write(filled)
             f.flush()
             scene = ts.load_scene(f.name)
-        sim = ts.Simulation(scene, threads=1, tuning=Tuning().with_(**changes))
+        sim = ts.Simulation(scene, threads=1, **simulation_options(changes))
         start = sim.checkpoint()            # one untimed step compiles (or loads) the
         sim.advance(sim.max_step())         # step's kernels; the fill then starts anew
         sim.restore(start)
@@ -114,13 +116,14 @@ def pour_fills(changes: dict, fills: int) -> dict:
 
 def measure(name: str, changes: dict, every: int, fills: int) -> dict:
     """The pour's bed, the heavy ball, the settling block and the fills under
-    Tuning().with_(**changes)."""
+    ``changes`` (Tuning fields and step_fraction: simulation_options)."""
     scene = ts.load_scene(os.path.join(ROOT, "scenes", "pour.toml"))
     bed = run(scene, 1.0, 2.0, every, changes)
-    tuning = Tuning().with_(**changes)
-    block, settled = settled_block(0.0, tuning)
-    ball = drop(block, settled, 8.0, "auto", 300, tuning)
-    rise = block_energy_rise(tuning)
+    options = simulation_options(changes)
+    block, settled = settled_block(0.0, options["tuning"], options.get("step_fraction"))
+    ball = drop(block, settled, 8.0, "auto", 300, options["tuning"],
+                options.get("step_fraction"))
+    rise = block_energy_rise(options)
     many = pour_fills(changes, fills) if fills else None
     print(name, bed, ball, rise, many, flush=True)
     return dict(bed, ball=ball["growth"], ball_step=ball["step"], rise=rise, fills=many)
@@ -169,8 +172,7 @@ def report(args, rows) -> str:
     lines.append("")
     for v in args.variants:
         name, changes = parse_variant(v)
-        lines.append(f"- {name}: `Tuning().with_("
-                     f"{', '.join(f'{k}={x!r}' for k, x in changes.items())})`")
+        lines.append(f"- {name}: `{variant_text(changes)}`")
     return "\n".join(lines) + "\n"
 
 

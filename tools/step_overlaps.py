@@ -38,13 +38,31 @@ from contact_solver import max_overlap  # noqa: E402  (tools/contact_solver.py)
 from machine import FORMER_DEFAULTS, cpu_name, publish, tuning_text  # noqa: E402
 
 
+def simulation_options(changes: dict) -> dict:
+    """Simulation keywords of a variant's ``changes``: ``step_fraction`` (a Simulation
+    argument) if it names one, and ``tuning``, Tuning().with_ the other fields."""
+    fields = dict(changes)
+    out = {"step_fraction": fields.pop("step_fraction")} if "step_fraction" in fields else {}
+    out["tuning"] = Tuning().with_(**fields)
+    return out
+
+
+def variant_text(changes: dict) -> str:
+    """How a variant's ``changes`` build its Simulation, as code."""
+    fields = dict(changes)
+    sf = fields.pop("step_fraction", None)
+    text = f"Tuning().with_({', '.join(f'{k}={v!r}' for k, v in fields.items())})"
+    return text if sf is None else f"step_fraction={sf!r}, tuning={text}"
+
+
 def run(scene, start: float, duration: float, every: int, changes: dict) -> dict:
-    """Over the steps ending in [start, duration] with ``Tuning().with_(**changes)``:
+    """Over the steps ending in [start, duration] with ``changes`` (Tuning fields, and
+    the Simulation's step_fraction: simulation_options):
     the largest brute-force overlap after a sampled step (and when), the largest
     last_step["max_overlap"] (every step), wall seconds per simulated second of the
     steps alone (checks not timed), velocity and position sweeps per contact step,
     sweep-limit hits, and kinetic energy / initial total energy at ``duration``."""
-    sim = ts.Simulation(scene, threads=1, tuning=Tuning().with_(**changes))
+    sim = ts.Simulation(scene, threads=1, **simulation_options(changes))
     e0 = ts.observe.total_energy(sim.state(), scene.gravity)
     worst, when, reported, stepping = 0.0, 0.0, 0.0, 0.0
     sim.advance_to(start)
@@ -96,7 +114,7 @@ def report(args, rows) -> str:
               "sweep-limit hits over the measured steps (the brute-force checks are not "
               "timed; the steps run one by one, not fused)."]
     for name, changes in variants_of(args):
-        lines.append(f"- {name}: `Tuning().with_({', '.join(f'{k}={v!r}' for k, v in changes.items())})`")
+        lines.append(f"- {name}: `{variant_text(changes)}`")
     return "\n".join(lines) + "\n"
 
 
@@ -107,7 +125,8 @@ VARIANTS = ["defaults=", "former defaults=" + tuning_text(FORMER_DEFAULTS)]
 
 def parse_variant(text: str) -> tuple:
     """("name", {field: value}) from "name=field=value field=value" (values through
-    ast.literal_eval, else as strings)."""
+    ast.literal_eval, else as strings): Tuning fields, and step_fraction (the
+    Simulation's: simulation_options)."""
     import ast
     name, sep, rest = text.partition("=")
     if not sep or not name.strip():
@@ -121,7 +140,10 @@ def parse_variant(text: str) -> tuple:
             changes[field] = ast.literal_eval(value)
         except (ValueError, SyntaxError):
             changes[field] = value
-    Tuning().with_(**changes)  # ValueError naming an unknown field or a bad value
+    simulation_options(changes)  # ValueError naming an unknown field or a bad value
+    sf = changes.get("step_fraction", 0.1)
+    if not (isinstance(sf, (int, float)) and 0 < sf <= 1):
+        raise ValueError(f"variant {name!r}: step_fraction must be in (0, 1], got {sf!r}")
     return name.strip(), changes
 
 

@@ -36,17 +36,24 @@ R = 0.01
 HEIGHT, DOWN, SIDE, OFF_AXIS = 0.05, 1.0, 0.3, 0.003
 
 
-def settled_block(mu: float, tuning=None):
+def settled_block(mu: float, tuning=None, step_fraction=None):
     """The 256-sphere block with friction mu, and its state after 1 s (``tuning``:
-    default Tuning())."""
+    default Tuning(); ``step_fraction``: the Simulation's, None for its default)."""
     block = fcc_block((4, 4, 4), radius=R, restitution=0.5).replace(
         friction=mu, wall_friction=mu)
-    sim = ts.Simulation(block, threads=1, tuning=tuning or Tuning())
+    sim = ts.Simulation(block, threads=1, tuning=tuning or Tuning(),
+                        **step_fraction_option(step_fraction))
     sim.advance(1.0)
     return block, sim.state()
 
 
-def drop(block, settled, ratio: float, mode: str, steps: int, tuning=None) -> dict:
+def step_fraction_option(step_fraction) -> dict:
+    """Simulation keywords for ``step_fraction`` (None: none, the default)."""
+    return {} if step_fraction is None else {"step_fraction": step_fraction}
+
+
+def drop(block, settled, ratio: float, mode: str, steps: int, tuning=None,
+         step_fraction=None) -> dict:
     """The ball dropped onto the settled block (module docstring) under
     bounded_warm_start ``mode`` (other settings: ``tuning``, default Tuning()): largest
     one-step energy growth / impact energy, the step it happened, steps scaled."""
@@ -54,7 +61,8 @@ def drop(block, settled, ratio: float, mode: str, steps: int, tuning=None) -> di
                                 side=SIDE)
     mass = scene.mass
     sim = ts.Simulation(scene, threads=1,
-                        tuning=(tuning or Tuning()).with_(bounded_warm_start=mode))
+                        tuning=(tuning or Tuning()).with_(bounded_warm_start=mode),
+                        **step_fraction_option(step_fraction))
     sim.set_state(x, v)
     energy = [sim.energy_budget()["current"]]
     for _ in range(steps):
