@@ -128,6 +128,11 @@ FORMER_DEFAULTS = dict(relaxation=1.0, position_iterations=100, substeps=False,
                        step_scaled_sweeps=False)
 
 
+def step_fraction_option(step_fraction) -> dict:
+    """Simulation keywords for ``step_fraction`` (None: none, the Simulation's default)."""
+    return {} if step_fraction is None else {"step_fraction": step_fraction}
+
+
 def tuning_text(changes: dict) -> str:
     """Tuning.with_ keywords as blank-separated NAME=VALUE items (--tuning's form)."""
     return " ".join(f"{name}={value}" for name, value in changes.items())

@@ -79,7 +79,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from machine import tuning_args  # noqa: E402  (tools/machine.py; --tuning)
+from machine import step_fraction_option, tuning_args  # noqa: E402  (tools/machine.py)
 
 RADIUS = 0.015       # m
 DENSITY = 1000.0     # kg/m^3
@@ -439,7 +439,7 @@ def run_taichi_scene(scene, phases, threads, warm_t=None, fused=True, tuning=Non
     t = time.perf_counter()
     sim = ts.Simulation(scene, arch="cpu", threads=threads, fused=fused,
                         tuning=Tuning().with_(**(tuning or {})),
-                        **({} if step_fraction is None else {"step_fraction": step_fraction}))
+                        **step_fraction_option(step_fraction))
     if warm_t is None:
         warm_t = phases[-1] if sim.fused else phases[0]
     ckpt0 = sim.checkpoint()

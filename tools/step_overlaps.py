@@ -35,16 +35,16 @@ sys.path.insert(0, HERE)
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from contact_solver import max_overlap  # noqa: E402  (tools/contact_solver.py)
-from machine import FORMER_DEFAULTS, cpu_name, publish, tuning_text  # noqa: E402
+from machine import (FORMER_DEFAULTS, cpu_name, publish, step_fraction_option,  # noqa: E402
+                     tuning_text)
 
 
 def simulation_options(changes: dict) -> dict:
     """Simulation keywords of a variant's ``changes``: ``step_fraction`` (a Simulation
     argument) if it names one, and ``tuning``, Tuning().with_ the other fields."""
     fields = dict(changes)
-    out = {"step_fraction": fields.pop("step_fraction")} if "step_fraction" in fields else {}
-    out["tuning"] = Tuning().with_(**fields)
-    return out
+    return dict(step_fraction_option(fields.pop("step_fraction", None)),
+                tuning=Tuning().with_(**fields))
 
 
 def variant_text(changes: dict) -> str:

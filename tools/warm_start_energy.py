@@ -29,7 +29,7 @@ sys.path.insert(0, HERE)
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.builders import ball_on_block, fcc_block  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
-from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
+from machine import cpu_name, publish, step_fraction_option  # noqa: E402  (tools/machine.py)
 
 G = 9.81
 R = 0.01
@@ -45,11 +45,6 @@ def settled_block(mu: float, tuning=None, step_fraction=None):
                         **step_fraction_option(step_fraction))
     sim.advance(1.0)
     return block, sim.state()
-
-
-def step_fraction_option(step_fraction) -> dict:
-    """Simulation keywords for ``step_fraction`` (None: none, the default)."""
-    return {} if step_fraction is None else {"step_fraction": step_fraction}
 
 
 def drop(block, settled, ratio: float, mode: str, steps: int, tuning=None,
