@@ -6,6 +6,7 @@ No timings or measured values are asserted (the tools are the measurement)."""
 import argparse
 import os
 import sys
+import types
 
 import numpy as np
 import pytest
@@ -34,6 +35,8 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (settings_tradeoff, ["--fills", "-1"], "--fills must be >= 0"),
     (settings_tradeoff, ["--variants", "long=step_fraction=1.5"],
      "variant 'long': step_fraction must be in (0, 1], got 1.5"),
+    (settings_tradeoff, ["--variants", "long=step_fraction=True"],
+     "variant 'long': step_fraction must be in (0, 1], got True"),
     (silo_overlaps, ["--first", "0"], "--first must be >= 1"),
     (row_activity, ["--at", "-1"], "--at times must be >= 0"),
     (row_activity, ["--threshold", "1"], "--threshold must be in [0, 1)"),
@@ -236,3 +239,35 @@ def test_variants_may_set_the_step_fraction():
     assert step_overlaps.variant_text(changes) == \
         "step_fraction=0.2, tuning=Tuning().with_(position_iterations=100)"
     assert step_overlaps.variant_text({"relaxation": 1.5}) == "Tuning().with_(relaxation=1.5)"
+
+
+def test_a_variants_step_fraction_reaches_every_simulation_it_builds(monkeypatch):
+    """settings_tradeoff's runs (the bed step by step, the fills, the settling block,
+    the settled block and the heavy ball's drop) each build their Simulation with the
+    variant's step_fraction and tuning."""
+    import taichi_spheres as ts
+    from taichi_spheres.config import Tuning
+    seen = []
+
+    def fake(*_, **keywords):
+        seen.append(keywords)
+        raise RuntimeError("no run")
+    monkeypatch.setattr(ts, "Simulation", fake)
+    changes = dict(step_fraction=0.2, position_iterations=100)
+    options = step_overlaps.simulation_options(changes)
+    tuning = Tuning().with_(position_iterations=100)
+    runs = [lambda: step_overlaps.run(None, 1.0, 2.0, 1, changes),
+            lambda: settings_tradeoff.pour_fills(changes, 1),
+            lambda: settings_tradeoff.block_energy_rise(options),
+            lambda: warm_start_energy.settled_block(0.0, tuning, 0.2)]
+    for run in runs:
+        with pytest.raises(RuntimeError):
+            run()
+    block = ts.builders.fcc_block((4, 4, 4), radius=warm_start_energy.R, restitution=0.5)
+    with pytest.raises(RuntimeError):
+        settled = types.SimpleNamespace(x=block.x, v=block.v, mass=block.mass,
+                                        radius=block.radius)
+        warm_start_energy.drop(block, settled, 8.0, "auto", 1, tuning, 0.2)
+    assert len(seen) == 5
+    assert all(k["step_fraction"] == 0.2 for k in seen)
+    assert all(k["tuning"].physics.position_iterations == 100 for k in seen)

@@ -117,21 +117,39 @@ def test_rerun_command_keeps_the_report_file_and_tuning():
         "shock_propagation=on")
 
 
-def test_step_fraction_goes_to_the_simulation_and_the_rerun_command():
-    """--step-fraction: in (0, 1], with --out (the default report is the defaults'), in
-    the report's rerun command; without --scene an error."""
+def test_step_fraction_goes_to_the_simulation_and_the_rerun_command(monkeypatch, capsys):
+    """--step-fraction: in (0, 1], with --out (the default report is the defaults'),
+    handed to taichi_spheres' Simulation and named in the report's rerun command;
+    without --scene an error."""
+    import taichi_spheres as ts
     args, ap = _scene_args(("step_fraction", 0.15), ("out", "docs/peer_lammps_pour_sf.md"))
-    peer_lammps.scene_args(args, ap)
+    scene = peer_lammps.scene_args(args, ap)
     assert peer_lammps.rerun_command(args).endswith(
         "--only taichi --out docs/peer_lammps_pour_sf.md --step-fraction 0.15")
+    assert peer_lammps.rerun_text(args).endswith(
+        "--step-fraction 0.15 --lammps-json FILE`.")
     assert peer_lammps.step_fraction_text(0.15) == ", step_fraction 0.15"
     assert peer_lammps.step_fraction_text(None) == ""
-    for bad in ((("step_fraction", 1.5), ("out", "x.md")), (("step_fraction", 0.15),)):
+    seen = []
+
+    def fake(*_, **keywords):
+        seen.append(keywords)
+        raise RuntimeError("no run")
+    monkeypatch.setattr(ts, "Simulation", fake)
+    for step_fraction in (0.15, None):
+        with pytest.raises(RuntimeError):
+            peer_lammps.run_taichi_scene(scene, [1.0, 2.0], 1, step_fraction=step_fraction)
+    assert seen[0]["step_fraction"] == 0.15 and "step_fraction" not in seen[1]
+    for bad, words in (((("step_fraction", 1.5), ("out", "x.md")),
+                        "--step-fraction: step_fraction must be in (0, 1], got 1.5"),
+                       ((("step_fraction", 0.15),), "--step-fraction needs --out")):
         args, ap = _scene_args(*bad)
         with pytest.raises(SystemExit):
             peer_lammps.scene_args(args, ap)
+        assert words in capsys.readouterr().err
     with pytest.raises(SystemExit):
         peer_lammps.main(["--step-fraction", "0.15", "--no-write"])
+    assert "--step-fraction needs --scene" in capsys.readouterr().err
 
 
 def test_saved_run_needs_the_same_scene(tmp_path):

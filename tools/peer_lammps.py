@@ -882,8 +882,10 @@ def scene_args(args, ap):
     if args.tuning and args.out is None:
         ap.error("--tuning needs --out: the default report is for the default settings")
     if args.step_fraction is not None:
-        if not 0 < args.step_fraction <= 1:
-            ap.error(f"--step-fraction must be in (0, 1], got {args.step_fraction:g}")
+        try:
+            step_fraction_option(args.step_fraction)
+        except ValueError as exc:
+            ap.error(f"--step-fraction: {exc}")
         if args.out is None:
             ap.error("--step-fraction needs --out: the default report is for the default "
                      "settings")
@@ -1012,7 +1014,7 @@ def lammps_scene_text(args, scene):
 
 def step_fraction_text(step_fraction) -> str:
     """', step_fraction X' for the report, or '' for the Simulation's default."""
-    return "" if step_fraction is None else f", step_fraction {step_fraction:g}"
+    return "" if step_fraction is None else f", step_fraction {step_fraction!r}"
 
 
 def tuning_text(tuning) -> str:
@@ -1086,14 +1088,22 @@ def scene_result_lines(args, results, overlap):
     if len(results) == 2:
         lines += ["LAMMPS wall time / taichi_spheres wall time per simulated second: "
                   + ratio_text(results, args.phases) + ".", ""]
-    lines += [f"Rerun taichi_spheres only, against the saved LAMMPS run: `{rerun_command(args)}`.",
-              ""]
+    lines += [rerun_text(args), ""]
     return lines
+
+
+def rerun_text(args) -> str:
+    """The report's last line: how to rerun taichi_spheres' side against the saved LAMMPS
+    run (--lammps-json), or, where none was saved, how to save one first."""
+    if args.lammps_json:
+        return f"Rerun taichi_spheres only, against the saved LAMMPS run: `{rerun_command(args)}`."
+    return ("Rerun taichi_spheres only: save LAMMPS's run by adding `--lammps-json FILE` to "
+            f"the command above, then `{rerun_command(args)} --lammps-json FILE`.")
 
 
 def rerun_command(args) -> str:
     """The command that reruns this --scene report's taichi_spheres side against its saved
-    LAMMPS run, into the same file with the same --tuning."""
+    LAMMPS run, into the same file with the same --step-fraction and --tuning."""
     t1, t2 = args.phases
     cmd = (f"python tools/peer_lammps.py --scene {args.scene_file} --phases {t1:g} {t2:g} "
            "--only taichi")
@@ -1102,7 +1112,7 @@ def rerun_command(args) -> str:
     if os.path.abspath(args.out) != args.default_out:
         cmd += f" --out {os.path.relpath(os.path.abspath(args.out), os.path.abspath(ROOT))}"
     if args.step_fraction is not None:
-        cmd += f" --step-fraction {args.step_fraction:g}"
+        cmd += f" --step-fraction {args.step_fraction!r}"
     if args.tuning:
         cmd += " --tuning " + " ".join(f"{k}={v}" for k, v in args.tuning.items())
     return cmd

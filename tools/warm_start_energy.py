@@ -50,7 +50,8 @@ def settled_block(mu: float, tuning=None, step_fraction=None):
 def drop(block, settled, ratio: float, mode: str, steps: int, tuning=None,
          step_fraction=None) -> dict:
     """The ball dropped onto the settled block (module docstring) under
-    bounded_warm_start ``mode`` (other settings: ``tuning``, default Tuning()): largest
+    bounded_warm_start ``mode`` (other settings: ``tuning``, default Tuning();
+    ``step_fraction``: the Simulation's, None for its default): largest
     one-step energy growth / impact energy, the step it happened, steps scaled."""
     scene, x, v = ball_on_block(block, settled, ratio, HEIGHT, DOWN, offset=OFF_AXIS,
                                 side=SIDE)
