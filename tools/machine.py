@@ -140,6 +140,11 @@ def step_fraction_option(step_fraction) -> dict:
     return {"step_fraction": step_fraction}
 
 
+def tuning_code(changes: dict) -> str:
+    """Tuning.with_ keywords as the code that builds them: ``Tuning().with_(k=v, ...)``."""
+    return "Tuning().with_(" + ", ".join(f"{k}={v!r}" for k, v in changes.items()) + ")"
+
+
 def tuning_text(changes: dict) -> str:
     """Tuning.with_ keywords as blank-separated NAME=VALUE items (--tuning's form)."""
     return " ".join(f"{name}={value}" for name, value in changes.items())

@@ -79,7 +79,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from machine import step_fraction_option, tuning_args  # noqa: E402  (tools/machine.py)
+from machine import step_fraction_option, tuning_args, tuning_code  # noqa: E402
 
 RADIUS = 0.015       # m
 DENSITY = 1000.0     # kg/m^3
@@ -1021,7 +1021,7 @@ def tuning_text(tuning) -> str:
     """', with Tuning().with_(...)' for the report, or '' for the defaults."""
     if not tuning:
         return ""
-    return ", with `Tuning().with_(" + ", ".join(f"{k}={v!r}" for k, v in tuning.items()) + ")`"
+    return f", with `{tuning_code(tuning)}`"
 
 
 def scene_header_lines(args, results, elapsed, saved, loads):

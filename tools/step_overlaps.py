@@ -36,7 +36,7 @@ import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from contact_solver import max_overlap  # noqa: E402  (tools/contact_solver.py)
 from machine import (FORMER_DEFAULTS, cpu_name, publish, step_fraction_option,  # noqa: E402
-                     tuning_text)
+                     tuning_code, tuning_text)
 
 
 def simulation_options(changes: dict) -> dict:
@@ -51,7 +51,7 @@ def variant_text(changes: dict) -> str:
     """How a variant's ``changes`` build its Simulation, as code."""
     fields = dict(changes)
     sf = fields.pop("step_fraction", None)
-    text = f"Tuning().with_({', '.join(f'{k}={v!r}' for k, v in fields.items())})"
+    text = tuning_code(fields)
     return text if sf is None else f"step_fraction={sf!r}, tuning={text}"
 
 
