@@ -64,10 +64,17 @@ class GaussSeidel:
         read-modify-write, not ``+=``: a parallel loop would make that an atomic add
         (a compare-and-swap loop per f64 component on the CPU, ~3x the row's cost),
         and the colours already keep two threads off one sphere (same sums, same
-        bits)."""
-        field[a] = field[a] + impulse * self.inv_mass(a) * n
-        if b >= 0:
-            field[b] = field[b] - impulse * self.inv_mass(b) * n
+        bits). With equal masses both spheres take one product (the same bits as one
+        each)."""
+        if ti.static(self.f.equal_masses):
+            step = impulse * self.state.inv_m0[None] * n
+            field[a] = field[a] + step
+            if b >= 0:
+                field[b] = field[b] - step
+        else:
+            field[a] = field[a] + impulse * self.inv_mass(a) * n
+            if b >= 0:
+                field[b] = field[b] - impulse * self.inv_mass(b) * n
 
     @ti.func
     def solve_row(self, s, mode: ti.template(), omega):
@@ -105,7 +112,24 @@ class GaussSeidel:
         new = ti.max(old + omega * meff * (goal[s] - rel.dot(n)), 0)
         acc[s] = new
         self.push(field, a, b, n, new - old)
-        return ti.abs(new - old) / meff
+        return self.speed_change(ti.abs(new - old), b, meff)
+
+    @ti.func
+    def speed_change(self, impulse, b, meff):
+        """The relative speed an impulse [N s] changes in a row of effective mass
+        ``meff`` [kg] (impulse / m_eff [m/s], the sweep's residual). With equal masses
+        1 / m_eff is 1/m for a wall row (b < 0) and 2/m for a pair: a product instead
+        of a division in every row update (the residual may differ from the quotient
+        in its last bit; no velocity uses it)."""
+        out = ti.cast(0, self.real)
+        if ti.static(self.f.equal_masses):
+            inv = self.state.inv_m0[None]
+            if b >= 0:
+                inv = inv + inv
+            out = impulse * inv
+        else:
+            out = impulse / meff
+        return out
 
     @ti.func
     def rows_of(self, k):
