@@ -275,12 +275,12 @@ def cmd_info(scene: Scene, args):
     from .config import DEFAULT
     from .contacts.shock import shock_compiled
     from .grid import GridGeometry
-    from .simulation import DEFAULT_STEP_FRACTION, estimate_field_bytes, rest_speed_for
+    from .simulation import estimate_field_bytes, rest_speed_for, scene_run_settings
     from .state import Features
-    run, physics, render = _settings(scene)
-    fraction = physics.get("step_fraction", DEFAULT_STEP_FRACTION)
+    run, _, render = _settings(scene)
+    fraction, _, precision = scene_run_settings(scene)
     geom = GridGeometry.for_scene(scene, fraction)
-    precision = physics.get("precision") or runtime.default_precision(args.arch)
+    precision = precision or runtime.default_precision(args.arch)
     rest_speed = rest_speed_for(scene, fraction)
     features = Features.from_scene(scene, rest_speed)
     memory = estimate_field_bytes(scene, precision, fraction)
@@ -392,8 +392,9 @@ class RunSettings:
 
 
 def run_settings(scene: Scene, args) -> RunSettings:
-    from .simulation import DEFAULT_MAX_SWEEPS, DEFAULT_STEP_FRACTION
-    run, physics, render = _settings(scene)
+    from .simulation import scene_run_settings
+    run, _, render = _settings(scene)
+    fraction, sweeps, _ = scene_run_settings(scene)
     output = scene.meta.get("output", {})
     video_path = args.output or output.get("video")
     if video_path is None:
@@ -406,8 +407,7 @@ def run_settings(scene: Scene, args) -> RunSettings:
                            render.get("height", DEFAULT_SIZE[1])),
         video_path=video_path, npz=args.npz or output.get("snapshots", False),
         checkpoint_every=args.checkpoint_every or output.get("checkpoint_every"),
-        step_fraction=physics.get("step_fraction", DEFAULT_STEP_FRACTION),
-        max_sweeps=physics.get("max_sweeps", DEFAULT_MAX_SWEEPS),
+        step_fraction=fraction, max_sweeps=sweeps,
         trajectory=args.trajectory or output.get("trajectory"),
         trajectory_every=args.every or output.get("trajectory_every"))
 

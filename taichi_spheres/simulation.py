@@ -116,11 +116,30 @@ def _keeps_near_lists(scene: Scene, geom: GridGeometry, perf: Performance) -> bo
         near_allowance(geom, float(scene.radius.max()), perf.near_safety)[1] > 0
 
 
+def scene_run_settings(scene: Scene, step_fraction=None, max_sweeps=None,
+                       precision=None) -> tuple:
+    """(step_fraction, max_sweeps, precision) of a Simulation: each argument given,
+    else the scene file's ``[physics]`` value (``scene.meta["physics"]``), else the
+    default (DEFAULT_STEP_FRACTION, DEFAULT_MAX_SWEEPS; precision None: the arch's)."""
+    physics = scene.meta.get("physics", {}) if isinstance(scene, Scene) else {}
+    if step_fraction is None:
+        step_fraction = physics.get("step_fraction", DEFAULT_STEP_FRACTION)
+    if max_sweeps is None:
+        max_sweeps = physics.get("max_sweeps", DEFAULT_MAX_SWEEPS)
+    if precision is None:
+        precision = physics.get("precision")
+    return step_fraction, max_sweeps, precision
+
+
 def _checked_arguments(scene, step_fraction, max_sweeps, fused, compile_all, tuning) -> float:
     """Raise ValueError naming a bad Simulation argument; returns step_fraction."""
     if not isinstance(scene, Scene):
         raise ValueError(f"scene must be a taichi_spheres.Scene, got {type(scene).__name__}")
-    step_fraction = float(step_fraction)
+    try:
+        step_fraction = float(step_fraction)
+    except (TypeError, ValueError):
+        raise ValueError(f"step_fraction must be a number in (0, 1], got "
+                         f"{step_fraction!r}") from None
     if not (0.0 < step_fraction <= 1.0):
         raise ValueError(f"step_fraction must be in (0, 1], got {step_fraction}")
     if not isinstance(max_sweeps, int) or max_sweeps < 1:
@@ -147,7 +166,10 @@ class Simulation:
 
     arch: 'cpu' | 'gpu' | 'cuda' | 'vulkan' | 'metal'. precision: 'f64' (default on
     cpu/cuda) or 'f32' (default on vulkan/metal). step_fraction: largest move per
-    step / smallest radius, in (0, 1]. max_sweeps: detect/resolve sweeps per step.
+    step / smallest radius, in (0, 1] (default 0.1). max_sweeps: detect/resolve sweeps
+    per step (default 32). precision, step_fraction and max_sweeps left None take the
+    scene file's ``[physics]`` values where it has them (scene_run_settings), as
+    ``taichi-spheres run`` does.
     threads: CPU threads (None: Taichi's default). compile_all: compile every
     optional feature in even when the scene does not need it (same results; for
     measuring what compiling them out saves). fused: for systems small enough that
@@ -161,9 +183,11 @@ class Simulation:
     """
 
     def __init__(self, scene: Scene, arch: str = "cpu", precision: str | None = None,
-                 step_fraction: float = DEFAULT_STEP_FRACTION,
-                 max_sweeps: int = DEFAULT_MAX_SWEEPS, threads: int | None = None,
+                 step_fraction: float | None = None,
+                 max_sweeps: int | None = None, threads: int | None = None,
                  compile_all: bool = False, fused: bool = False, tuning: Tuning | None = None):
+        step_fraction, max_sweeps, precision = scene_run_settings(
+            scene, step_fraction, max_sweeps, precision)
         step_fraction = _checked_arguments(scene, step_fraction, max_sweeps, fused,
                                            compile_all, tuning)
         self.scene = scene

@@ -85,11 +85,10 @@ def _scene_for(spec, params):
 
 def _simulation_args(scene, params, options) -> dict:
     """Simulation arguments of one run: the grid's, else the scene file's [physics]."""
-    from .simulation import DEFAULT_MAX_SWEEPS, DEFAULT_STEP_FRACTION
-    physics = scene.meta.get("physics", {})
-    args = dict(step_fraction=physics.get("step_fraction", DEFAULT_STEP_FRACTION),
-                max_sweeps=physics.get("max_sweeps", DEFAULT_MAX_SWEEPS),
-                precision=options.get("precision") or physics.get("precision"),
+    from .simulation import scene_run_settings
+    fraction, sweeps, precision = scene_run_settings(scene,
+                                                     precision=options.get("precision"))
+    args = dict(step_fraction=fraction, max_sweeps=sweeps, precision=precision,
                 arch=options.get("arch", "cpu"), threads=options.get("threads"))
     args.update({k: v for k, v in params.items() if k in SIMULATION_PARAMETERS})
     return args

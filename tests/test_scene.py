@@ -555,6 +555,27 @@ def test_tuning_table_sets_the_simulations_options(tmp_path, arch):
     assert "tuning" not in ts.load_scene(write(tmp_path, GOOD)).meta
 
 
+def test_physics_table_sets_the_simulations_run_settings(tmp_path, arch):
+    """[physics] step_fraction, max_sweeps and precision reach a Simulation of the scene
+    left without them, as they reach `taichi-spheres run`; arguments given win."""
+    from taichi_spheres.simulation import (DEFAULT_MAX_SWEEPS, DEFAULT_STEP_FRACTION,
+                                           scene_run_settings)
+    scene = ts.load_scene(write(tmp_path, GOOD.replace(
+        'precision = "f64"', 'precision = "f64"\nstep_fraction = 0.15\nmax_sweeps = 8')))
+    assert scene_run_settings(scene) == (0.15, 8, "f64")
+    assert scene_run_settings(scene, 0.05, 4, "f32") == (0.05, 4, "f32")
+    plain = ts.load_scene(write(tmp_path, GOOD.replace('precision = "f64"\n', "")))
+    assert scene_run_settings(plain) == (DEFAULT_STEP_FRACTION, DEFAULT_MAX_SWEEPS, None)
+    chosen = ts.load_scene(write(tmp_path, GOOD.replace(
+        'precision = "f64"', "step_fraction = 0.15\nmax_sweeps = 8")))
+    sim = ts.Simulation(chosen, arch=arch)
+    assert (sim.step_fraction, sim.max_sweeps) == (0.15, 8)
+    sim = ts.Simulation(chosen, arch=arch, step_fraction=0.05, max_sweeps=4)
+    assert (sim.step_fraction, sim.max_sweeps) == (0.05, 4)
+    with pytest.raises(ValueError, match="step_fraction must be a number in"):
+        ts.Simulation(chosen, arch=arch, step_fraction="fast")
+
+
 @pytest.mark.parametrize("line, problem", [
     ("relaxaton = 1.8", "unknown key 'tuning.relaxaton' (did you mean 'tuning.relaxation'?)"),
     ("contact_iterations = 4.5", "tuning.contact_iterations: must be an integer, got 4.5"),
