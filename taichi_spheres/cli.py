@@ -275,10 +275,10 @@ def cmd_info(scene: Scene, args):
     from .config import DEFAULT
     from .contacts.shock import shock_compiled
     from .grid import GridGeometry
-    from .simulation import estimate_field_bytes, rest_speed_for, scene_run_settings
+    from .simulation import estimate_field_bytes, rest_speed_for, scene_simulation_settings
     from .state import Features
     run, _, render = _settings(scene)
-    fraction, _, precision = scene_run_settings(scene)
+    fraction, _, precision = scene_simulation_settings(scene)
     geom = GridGeometry.for_scene(scene, fraction)
     precision = precision or runtime.default_precision(args.arch)
     rest_speed = rest_speed_for(scene, fraction)
@@ -392,9 +392,9 @@ class RunSettings:
 
 
 def run_settings(scene: Scene, args) -> RunSettings:
-    from .simulation import scene_run_settings
+    from .simulation import scene_simulation_settings
     run, _, render = _settings(scene)
-    fraction, sweeps, _ = scene_run_settings(scene)
+    fraction, sweeps, _ = scene_simulation_settings(scene)
     output = scene.meta.get("output", {})
     video_path = args.output or output.get("video")
     if video_path is None:

@@ -116,8 +116,8 @@ def _keeps_near_lists(scene: Scene, geom: GridGeometry, perf: Performance) -> bo
         near_allowance(geom, float(scene.radius.max()), perf.near_safety)[1] > 0
 
 
-def scene_run_settings(scene: Scene, step_fraction=None, max_sweeps=None,
-                       precision=None) -> tuple:
+def scene_simulation_settings(scene: Scene, step_fraction=None, max_sweeps=None,
+                              precision=None) -> tuple:
     """(step_fraction, max_sweeps, precision) of a Simulation: each argument given,
     else the scene file's ``[physics]`` value (``scene.meta["physics"]``), else the
     default (DEFAULT_STEP_FRACTION, DEFAULT_MAX_SWEEPS; precision None: the arch's)."""
@@ -135,6 +135,8 @@ def _checked_arguments(scene, step_fraction, max_sweeps, fused, compile_all, tun
     """Raise ValueError naming a bad Simulation argument; returns step_fraction."""
     if not isinstance(scene, Scene):
         raise ValueError(f"scene must be a taichi_spheres.Scene, got {type(scene).__name__}")
+    if isinstance(step_fraction, (bool, str)):
+        raise ValueError(f"step_fraction must be a number in (0, 1], got {step_fraction!r}")
     try:
         step_fraction = float(step_fraction)
     except (TypeError, ValueError):
@@ -168,7 +170,7 @@ class Simulation:
     cpu/cuda) or 'f32' (default on vulkan/metal). step_fraction: largest move per
     step / smallest radius, in (0, 1] (default 0.1). max_sweeps: detect/resolve sweeps
     per step (default 32). precision, step_fraction and max_sweeps left None take the
-    scene file's ``[physics]`` values where it has them (scene_run_settings), as
+    scene file's ``[physics]`` values where it has them (scene_simulation_settings), as
     ``taichi-spheres run`` does.
     threads: CPU threads (None: Taichi's default). compile_all: compile every
     optional feature in even when the scene does not need it (same results; for
@@ -186,7 +188,7 @@ class Simulation:
                  step_fraction: float | None = None,
                  max_sweeps: int | None = None, threads: int | None = None,
                  compile_all: bool = False, fused: bool = False, tuning: Tuning | None = None):
-        step_fraction, max_sweeps, precision = scene_run_settings(
+        step_fraction, max_sweeps, precision = scene_simulation_settings(
             scene, step_fraction, max_sweeps, precision)
         step_fraction = _checked_arguments(scene, step_fraction, max_sweeps, fused,
                                            compile_all, tuning)

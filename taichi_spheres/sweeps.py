@@ -85,9 +85,9 @@ def _scene_for(spec, params):
 
 def _simulation_args(scene, params, options) -> dict:
     """Simulation arguments of one run: the grid's, else the scene file's [physics]."""
-    from .simulation import scene_run_settings
-    fraction, sweeps, precision = scene_run_settings(scene,
-                                                     precision=options.get("precision"))
+    from .simulation import scene_simulation_settings
+    fraction, sweeps, precision = scene_simulation_settings(
+        scene, precision=options.get("precision"))
     args = dict(step_fraction=fraction, max_sweeps=sweeps, precision=precision,
                 arch=options.get("arch", "cpu"), threads=options.get("threads"))
     args.update({k: v for k, v in params.items() if k in SIMULATION_PARAMETERS})

@@ -139,7 +139,9 @@ def test_step_fraction_goes_to_the_simulation_and_the_rerun_command(monkeypatch,
     for step_fraction in (0.15, None):
         with pytest.raises(RuntimeError):
             peer_lammps.run_taichi_scene(scene, [1.0, 2.0], 1, step_fraction=step_fraction)
-    assert seen[0]["step_fraction"] == 0.15 and "step_fraction" not in seen[1]
+    assert seen[0]["step_fraction"] == 0.15 and seen[1]["step_fraction"] == 0.1
+    # (the run's own settings, never the scene file's [physics] values)
+    assert all(k["precision"] == "f64" and k["max_sweeps"] == 32 for k in seen)
     for bad, words in (((("step_fraction", 1.5), ("out", "x.md")),
                         "--step-fraction: step_fraction must be in (0, 1], got 1.5"),
                        ((("step_fraction", 0.15),), "--step-fraction needs --out")):

@@ -548,10 +548,13 @@ def test_tuning_table_sets_the_simulations_options(tmp_path, arch):
                                 "warm_start = true\n"))
     assert scene.meta["tuning"] == dict(relaxation=1.8, contact_iterations=40,
                                         shock_propagation="on", warm_start=True)
-    sim = ts.Simulation(scene, arch=arch)
+    from taichi_spheres.runtime import default_precision
+    precision = default_precision(arch)     # (the scene asks for f64: not on every arch)
+    sim = ts.Simulation(scene, arch=arch, precision=precision)
     assert sim.tuning == DEFAULT.with_(relaxation=1.8, contact_iterations=40,
                                        shock_propagation="on")
-    assert ts.Simulation(scene, arch=arch, tuning=DEFAULT).tuning == DEFAULT
+    assert ts.Simulation(scene, arch=arch, precision=precision,
+                         tuning=DEFAULT).tuning == DEFAULT
     assert "tuning" not in ts.load_scene(write(tmp_path, GOOD)).meta
 
 
@@ -559,21 +562,22 @@ def test_physics_table_sets_the_simulations_run_settings(tmp_path, arch):
     """[physics] step_fraction, max_sweeps and precision reach a Simulation of the scene
     left without them, as they reach `taichi-spheres run`; arguments given win."""
     from taichi_spheres.simulation import (DEFAULT_MAX_SWEEPS, DEFAULT_STEP_FRACTION,
-                                           scene_run_settings)
+                                           scene_simulation_settings as settings)
     scene = ts.load_scene(write(tmp_path, GOOD.replace(
         'precision = "f64"', 'precision = "f64"\nstep_fraction = 0.15\nmax_sweeps = 8')))
-    assert scene_run_settings(scene) == (0.15, 8, "f64")
-    assert scene_run_settings(scene, 0.05, 4, "f32") == (0.05, 4, "f32")
+    assert settings(scene) == (0.15, 8, "f64")
+    assert settings(scene, 0.05, 4, "f32") == (0.05, 4, "f32")
     plain = ts.load_scene(write(tmp_path, GOOD.replace('precision = "f64"\n', "")))
-    assert scene_run_settings(plain) == (DEFAULT_STEP_FRACTION, DEFAULT_MAX_SWEEPS, None)
+    assert settings(plain) == (DEFAULT_STEP_FRACTION, DEFAULT_MAX_SWEEPS, None)
     chosen = ts.load_scene(write(tmp_path, GOOD.replace(
         'precision = "f64"', "step_fraction = 0.15\nmax_sweeps = 8")))
     sim = ts.Simulation(chosen, arch=arch)
     assert (sim.step_fraction, sim.max_sweeps) == (0.15, 8)
     sim = ts.Simulation(chosen, arch=arch, step_fraction=0.05, max_sweeps=4)
     assert (sim.step_fraction, sim.max_sweeps) == (0.05, 4)
-    with pytest.raises(ValueError, match="step_fraction must be a number in"):
-        ts.Simulation(chosen, arch=arch, step_fraction="fast")
+    for bad in ("fast", "0.15", True):
+        with pytest.raises(ValueError, match="step_fraction must be a number in"):
+            ts.Simulation(chosen, arch=arch, step_fraction=bad)
 
 
 @pytest.mark.parametrize("line, problem", [

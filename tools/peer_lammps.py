@@ -430,16 +430,20 @@ def phase_row(x, v, m, radius, scene, t_end, wall, t_prev, steps):
 def run_taichi_scene(scene, phases, threads, warm_t=None, fused=True, tuning=None,
                      step_fraction=None):
     """taichi_spheres (cpu, f64, `threads` threads; ``tuning``: Tuning.with_ changes;
-    ``step_fraction``: the Simulation's, None for its default)
+    ``step_fraction``: the Simulation's, None for its default, 0.1; the scene file's
+    [physics] and [tuning] do not apply, so that the report's settings are the run's)
     over [0, T1], [T1, T2] (phases [s]), after an untimed warm-up to warm_t [s] and a
     rewind to t = 0 (as run_taichi: default T2 with the fused step, else T1); rows as
     phase_row plus sim.stats' STAT_KEYS."""
     import taichi_spheres as ts
     from taichi_spheres.config import Tuning
     t = time.perf_counter()
-    sim = ts.Simulation(scene, arch="cpu", threads=threads, fused=fused,
+    from taichi_spheres.simulation import DEFAULT_MAX_SWEEPS, DEFAULT_STEP_FRACTION
+    sim = ts.Simulation(scene, arch="cpu", precision="f64", threads=threads, fused=fused,
                         tuning=Tuning().with_(**(tuning or {})),
-                        **step_fraction_option(step_fraction))
+                        max_sweeps=DEFAULT_MAX_SWEEPS,
+                        **step_fraction_option(DEFAULT_STEP_FRACTION if step_fraction is None
+                                               else step_fraction))
     if warm_t is None:
         warm_t = phases[-1] if sim.fused else phases[0]
     ckpt0 = sim.checkpoint()
@@ -610,7 +614,7 @@ def build_parser():
                          "...) (e.g. relaxation=1.8 contact_iterations=40)")
     ap.add_argument("--step-fraction", type=float, default=None,
                     help="with --scene: taichi_spheres runs with Simulation(step_fraction=...) "
-                         "(default: the Simulation's, 0.1)")
+                         "(default 0.1, whatever the scene file's [physics] says)")
     ap.add_argument("--only", choices=("both", "taichi", "lammps"), default="both")
     ap.add_argument("--lammps-json", default=None, metavar="FILE",
                     help="with --only lammps: save the LAMMPS result to FILE; otherwise: "

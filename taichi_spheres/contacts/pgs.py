@@ -119,8 +119,10 @@ class GaussSeidel:
         """The relative speed an impulse [N s] changes in a row of effective mass
         ``meff`` [kg] (impulse / m_eff [m/s], the sweep's residual). With equal masses
         1 / m_eff is 1/m for a wall row (b < 0) and 2/m for a pair: a product instead
-        of a division in every row update (the residual may differ from the quotient
-        in its last bit; no velocity uses it)."""
+        of a division in every row update. The residual may then differ from the
+        quotient in its last bit; it only decides when the sweeps stop (and is reported
+        as stats["contact_residual"]), so a solve could end a sweep sooner or later
+        only where a residual lies within that bit of the tolerance."""
         out = ti.cast(0, self.real)
         if ti.static(self.f.equal_masses):
             inv = self.state.inv_m0[None]
