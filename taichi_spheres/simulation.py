@@ -135,9 +135,9 @@ def _checked_arguments(scene, step_fraction, max_sweeps, fused, compile_all, tun
     """Raise ValueError naming a bad Simulation argument; returns step_fraction."""
     if not isinstance(scene, Scene):
         raise ValueError(f"scene must be a taichi_spheres.Scene, got {type(scene).__name__}")
-    if isinstance(step_fraction, (bool, str)):
-        raise ValueError(f"step_fraction must be a number in (0, 1], got {step_fraction!r}")
     try:
+        if isinstance(step_fraction, (bool, str)):
+            raise TypeError
         step_fraction = float(step_fraction)
     except (TypeError, ValueError):
         raise ValueError(f"step_fraction must be a number in (0, 1], got "

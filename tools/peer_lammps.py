@@ -437,8 +437,8 @@ def run_taichi_scene(scene, phases, threads, warm_t=None, fused=True, tuning=Non
     phase_row plus sim.stats' STAT_KEYS."""
     import taichi_spheres as ts
     from taichi_spheres.config import Tuning
-    t = time.perf_counter()
     from taichi_spheres.simulation import DEFAULT_MAX_SWEEPS, DEFAULT_STEP_FRACTION
+    t = time.perf_counter()
     sim = ts.Simulation(scene, arch="cpu", precision="f64", threads=threads, fused=fused,
                         tuning=Tuning().with_(**(tuning or {})),
                         max_sweeps=DEFAULT_MAX_SWEEPS,
