@@ -1,6 +1,7 @@
 """Projected Gauss–Seidel sweeps of the contact solver (contacts/solver.py): one
 update per row, cells of one colour in parallel (on the CPU a few of them per thread,
-interleaved: sweep_cells), colours in turn.
+interleaved: sweep_cells), colours in turn. A serial solve sweeps one list of the rows
+in that same order (schedule_rows, sweep_scheduled): the same bits.
 
 Row update (Catto's sequential impulses, Moreau–Jean): with u_n the row's normal
 relative velocity (separating > 0), lambda = max(lambda + omega m_eff (target - u_n),
@@ -161,27 +162,70 @@ class GaussSeidel:
         ti.atomic_max(self.residual[None], worst)
 
     @ti.func
-    def sweep_colour(self, colour, mode: ti.template(), serial: ti.template(), omega,
-                     batched: ti.template() = False):
-        """One pass over the cells of one colour that own rows (disjoint blocks: no two
-        threads touch a sphere), in list_active_cells order, k cells at a time with their
-        rows interleaved (sweep_cells; k: ContactSolver.interleave for serial sweeps,
-        interleave_parallel for parallel ones). ``batched``: a sweep of a batch
-        (batched_sweep): no cell once the batch's solve is done, the relaxation from
-        batch_omega instead of ``omega``."""
+    def sweep_colour(self, colour, mode: ti.template(), omega, batched: ti.template() = False):
+        """One parallel pass over the cells of one colour that own rows (disjoint
+        blocks: no two threads touch a sphere), in list_active_cells order, k cells at a
+        time with their rows interleaved (sweep_cells; k: ContactSolver.
+        interleave_parallel; serial sweeps run sweep_scheduled instead). ``batched``: a
+        sweep of a batch (batched_sweep): no cell once the batch's solve is done, the
+        relaxation from batch_omega instead of ``omega``."""
         start = self.colour_active[colour]
         end = self.colour_active[colour + 1]
-        k = ti.static(self.interleave if serial else self.interleave_parallel)
+        k = ti.static(self.interleave_parallel)
         count = (end - start + k - 1) // k
         if ti.static(batched):
             if self.batch_done[None] != 0:
                 count = 0
-        ti.loop_config(serialize=serial, block_dim=ti.static(self.sweep_block))
+        ti.loop_config(block_dim=ti.static(self.sweep_block))
         for u in range(count):
             relax = omega
             if ti.static(batched):
                 relax = self.batch_omega[None]
             self.sweep_cells(start + k * u, end, mode, relax, k)
+
+    @ti.func
+    def schedule_rows(self):
+        """The serial sweeps' order of the rows, one list for every colour in turn
+        (kernel top level, one serial task): colour c's rows are
+        schedule[schedule_start[c]:schedule_start[c + 1]], in sweep_cells' order (its
+        cells in groups of ``interleave``, row j of each cell of a group, then row
+        j + 1). A serial sweep (sweep_scheduled) then runs one plain loop over the
+        list, the same row updates in the same order as sweep_cells (the same bits),
+        without sweep_cells' test per cell and row of whether that cell still has a
+        row j, which the processor cannot predict where cells hold few rows."""
+        k = ti.static(self.interleave)
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            put = 0
+            for colour in range(self.n_colours_f[None]):
+                self.schedule_start[colour] = put
+                end = self.colour_active[colour + 1]
+                t = self.colour_active[colour]
+                while t < end:
+                    longest = 0
+                    for c in range(k):
+                        if t + c < end:
+                            lo, hi = self.rows_of(self.active_cells[t + c])
+                            longest = ti.max(longest, hi - lo)
+                    for j in range(longest):
+                        for c in range(k):
+                            if t + c < end:
+                                lo, hi = self.rows_of(self.active_cells[t + c])
+                                if lo + j < hi:
+                                    self.schedule[put] = lo + j
+                                    put += 1
+                    t += k
+            self.schedule_start[self.n_colours_f[None]] = put
+
+    @ti.func
+    def sweep_scheduled(self, colour, mode: ti.template(), omega):
+        """One serial pass over colour ``colour``'s rows in schedule order
+        (schedule_rows; call where everything runs serially); the largest change goes
+        to ``residual``."""
+        worst = ti.cast(0, self.real)
+        for t in range(self.schedule_start[colour], self.schedule_start[colour + 1]):
+            worst = ti.max(worst, self.solve_row(self.schedule[t], mode, omega))
+        self.residual[None] = ti.max(self.residual[None], worst)
 
     @ti.func
     def colour_of(self, k):
@@ -265,7 +309,7 @@ class GaussSeidel:
         share spheres; kernel top level)."""
         ti.loop_config(serialize=True)
         for colour in range(self.n_colours_f[None]):
-            self.sweep_colour(colour, WARM, True, 1.0)
+            self.sweep_scheduled(colour, WARM, 1.0)
 
     @ti.func
     def sweep_relaxation(self, it, relaxed, cap, last):
@@ -301,7 +345,7 @@ class GaussSeidel:
             omega, plain = self.sweep_relaxation(it, relaxed, cap, last[None])
             self.residual[None] = 0
             for colour in range(self.n_colours_f[None]):
-                self.sweep_colour(colour, mode, True, omega)
+                self.sweep_scheduled(colour, mode, omega)
             it, relaxed, done = self.after_sweep(it, relaxed, plain, cap, tol[None])
         return it
 
@@ -348,7 +392,7 @@ class GaussSeidel:
         per batch (batch_result) instead of once per sweep."""
         self.begin_batched_sweep(first, cap, last)
         for colour in ti.static(range(colours)):
-            self.sweep_colour(colour, mode, False, 1.0, True)
+            self.sweep_colour(colour, mode, 1.0, True)
         self.end_batched_sweep(cap, tol)
 
     @ti.func

@@ -173,6 +173,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.warm_t = ti.Vector.field(3, real, shape=(cap, slots)) if friction else None
         self.warm_r = ti.Vector.field(3, real, shape=(cap, slots)) if rolling else None
         self.active_cells = ti.field(ti.i32, shape=cells)
+        # the serial solve's order of the rows (pgs.schedule_rows)
+        serial_solve = self.serial or self.cpu
+        self.schedule = ti.field(ti.i32, shape=k) if serial_solve else None
+        self.schedule_start = ti.field(ti.i32, shape=MAX_COLOURS + 1) if serial_solve else None
         self.colour_active = ti.field(ti.i32, shape=MAX_COLOURS + 1)
         self.colour_fill = ti.field(ti.i32, shape=MAX_COLOURS)
         self.scan_bufs = self.grid.scan_buffers(self.cell_start)
@@ -465,6 +469,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             self.gather()
         elif ti.static(stage == 1):
             self.list_active_cells()
+            self.schedule_rows()
         elif ti.static(stage == 2):
             self.prepare_rows()
         elif ti.static(stage == 3):
@@ -558,7 +563,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             def sweep(omega: real) -> real:
                 self.residual[None] = 0
                 for colour in ti.static(range(colours)):
-                    self.sweep_colour(colour, mode, False, omega)
+                    self.sweep_colour(colour, mode, omega)
                 return self.residual[None]
             return sweep
 
