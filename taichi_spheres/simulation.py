@@ -131,19 +131,27 @@ def scene_simulation_settings(scene: Scene, step_fraction=None, max_sweeps=None,
     return step_fraction, max_sweeps, precision
 
 
+def check_step_fraction(step_fraction) -> float:
+    """``step_fraction`` (a Simulation's largest move per step / smallest radius) as a
+    float; ValueError unless it is a number in (0, 1] (a bool or a string is not). The
+    one check of a Simulation's argument and of the tools' options."""
+    message = f"step_fraction must be a number in (0, 1], got {step_fraction!r}"
+    if isinstance(step_fraction, (bool, str)):
+        raise ValueError(message)
+    try:
+        value = float(step_fraction)
+    except (TypeError, ValueError):
+        raise ValueError(message) from None
+    if not 0.0 < value <= 1.0:
+        raise ValueError(message)
+    return value
+
+
 def _checked_arguments(scene, step_fraction, max_sweeps, fused, compile_all, tuning) -> float:
     """Raise ValueError naming a bad Simulation argument; returns step_fraction."""
     if not isinstance(scene, Scene):
         raise ValueError(f"scene must be a taichi_spheres.Scene, got {type(scene).__name__}")
-    try:
-        if isinstance(step_fraction, (bool, str)):
-            raise TypeError
-        step_fraction = float(step_fraction)
-    except (TypeError, ValueError):
-        raise ValueError(f"step_fraction must be a number in (0, 1], got "
-                         f"{step_fraction!r}") from None
-    if not (0.0 < step_fraction <= 1.0):
-        raise ValueError(f"step_fraction must be in (0, 1], got {step_fraction}")
+    step_fraction = check_step_fraction(step_fraction)
     if not isinstance(max_sweeps, int) or max_sweeps < 1:
         raise ValueError(f"max_sweeps must be a positive int, got {max_sweeps!r}")
     if not isinstance(fused, bool):

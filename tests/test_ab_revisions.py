@@ -35,7 +35,11 @@ def test_worktrees_go_when_the_block_fails():
 @pytest.mark.parametrize("argv, message", [
     (["--interleaved"], "--interleaved needs --silo or --pour-bed"),
     (["--pour-bed", "--pour-seeds", "2", "--interleaved"], "without --pour-seeds"),
-    (["--silo", "--tuning", "relaxation=1.0"], "--tuning needs --silo --interleaved"),
+    (["--silo", "--tuning", "relaxation=1.0"], "--tuning needs --interleaved"),
+    (["--pour-bed", "--step-fraction", "0.2"], "--step-fraction needs --pour-bed --interleaved"),
+    (["--pour-bed", "--interleaved", "--step-fraction", "1.5"],
+     "step_fraction must be a number in (0, 1], got 1.5"),
+    (["--pour-bed", "--interleaved", "--tuning", "relax=1.0"], "unknown tuning field 'relax'"),
     (["--window", "0.1"], "--window and --repeats need --silo or --interleaved"),
     (["--pour-bed", "--interleaved", "--window", "0"], "--window takes seconds > 0"),
 ])

@@ -143,7 +143,7 @@ def test_step_fraction_goes_to_the_simulation_and_the_rerun_command(monkeypatch,
     # (the run's own settings, never the scene file's [physics] values)
     assert all(k["precision"] == "f64" and k["max_sweeps"] == 32 for k in seen)
     for bad, words in (((("step_fraction", 1.5), ("out", "x.md")),
-                        "--step-fraction: step_fraction must be in (0, 1], got 1.5"),
+                        "--step-fraction: step_fraction must be a number in (0, 1], got 1.5"),
                        ((("step_fraction", 0.15),), "--step-fraction needs --out")):
         args, ap = _scene_args(*bad)
         with pytest.raises(SystemExit):

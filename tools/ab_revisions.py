@@ -26,6 +26,8 @@ more steps.
     python tools/ab_revisions.py HEAD~1 HEAD --silo --interleaved --tuning \
         step_scaled_sweeps=False contact_iterations=60 position_iterations=10
     python tools/ab_revisions.py HEAD~1 HEAD --pour-bed --interleaved --window 0.05
+    python tools/ab_revisions.py HEAD~1 HEAD --pour-bed --interleaved --window 0.05 \
+        --step-fraction 0.2 --tuning position_iterations=100
 
 With ``--silo`` the measure is the frictional silo of tools/kernel_profile.py --silo
 (tools/peer_lammps_silo.py's 1,722 spheres, mu = 0.5, settled, 0.2 s into the
@@ -44,7 +46,8 @@ A B, then B A, each from its revision's checkpoint: a shared machine whose speed
 drifts from minute to minute slows both alike, where separate processes a minute
 apart can differ by 30 %. Reported: per revision the fastest and the median window,
 and the median of the per-pair ratios B / A (``--rounds``, ``--n`` and
-``--precision`` do not apply).
+``--precision`` do not apply). ``--tuning`` gives both runs Tuning.with_ keywords
+(the silo's through tools/silo.py), ``--step-fraction`` the pour's step bound.
 """
 from __future__ import annotations
 
@@ -61,6 +64,10 @@ import tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.abspath(os.path.join(HERE, ".."))
+sys.path.insert(0, ROOT)
+sys.path.insert(0, HERE)
+
+from machine import step_fraction_option, tuning_args  # noqa: E402  (tools/machine.py)
 
 
 def checkout(rev: str, where: str) -> str:
@@ -147,12 +154,14 @@ print("windows", *times)
 
 
 #: --interleaved: run in this checkout; argv: the two worktrees, "silo" or "pour",
-#: window [s], repeats and (silo) tools/silo.py's --tuning items
+#: window [s], repeats, the pour's step_fraction ("none": the default) and the --tuning
+#: items (silo: tools/silo.py's; pour: Tuning.with_ keywords)
 INTERLEAVED = """
 import importlib.util, sys, time
 sys.path.insert(0, "tools")
 tree_a, tree_b, what = sys.argv[1:4]
-window, repeats, tuning = float(sys.argv[4]), int(sys.argv[5]), sys.argv[6:]
+window, repeats = float(sys.argv[4]), int(sys.argv[5])
+fraction, tuning = sys.argv[6], sys.argv[7:]
 
 def load(path, name, folder=None):
     # the module file ``path`` as ``name`` (``folder``: a package's, for its submodules)
@@ -192,7 +201,17 @@ if what == "silo":
     sims = [silo.discharging(a, settled, a.orifice * a.radius) for silo in (silo_a, silo_b)]
     start = 0.2
 else:
-    sims = [ts.Simulation(ts.load_scene("scenes/pour.toml"), threads=1)
+    import ast
+    changes = {}
+    for item in tuning:
+        name, _, text = item.partition("=")
+        try:
+            changes[name] = ast.literal_eval(text)
+        except (ValueError, SyntaxError):
+            changes[name] = text
+    extra = {} if fraction == "none" else {"step_fraction": float(fraction)}
+    sims = [ts.Simulation(ts.load_scene("scenes/pour.toml"), threads=1,
+                          tuning=ts.config.Tuning().with_(**changes), **extra)
             for ts in (ts_a, ts_b)]
     start = 1.0
 starts = []
@@ -215,12 +234,17 @@ for k in range(2):
 """
 
 
-def interleaved(trees: tuple, what: str, window: float, repeats: int, tuning=()) -> tuple:
+def interleaved(trees: tuple, what: str, window: float, repeats: int, tuning=(),
+                step_fraction=None) -> tuple:
     """([A's wall s per step per window], [B's], (A's steps, B's)) of ``window`` s of
     the silo's discharge (``what`` "silo") or the pour's bed ("pour"), both revisions'
-    windows alternating in one process (``tuning``: tools/silo.py's --tuning items)."""
+    windows alternating in one process (``tuning``: --tuning items, tools/silo.py's
+    or, for the pour, Tuning.with_ keywords; ``step_fraction``: the pour's, None for
+    the default)."""
+    fraction = "none" if step_fraction is None else repr(step_fraction)
     out = subprocess.run([sys.executable, "-c", INTERLEAVED, *trees, what, str(window),
-                          str(repeats), *tuning], capture_output=True, text=True, cwd=ROOT)
+                          str(repeats), fraction, *tuning], capture_output=True, text=True,
+                         cwd=ROOT)
     if out.returncode != 0:
         raise RuntimeError(f"the interleaved run failed:\n{out.stderr[-3000:]}")
     steps = re.search(r"^steps ([0-9]+) ([0-9]+)$", out.stdout, re.M)
@@ -237,7 +261,7 @@ def interleaved_main(args) -> int:
     with worktrees(a_rev, b_rev) as trees:
         a, b, steps = interleaved((trees[a_rev], trees[b_rev]),
                                   "silo" if args.silo else "pour", args.window,
-                                  args.repeats, args.tuning)
+                                  args.repeats, args.tuning, args.step_fraction)
     for rev, times in ((a_rev, a), (b_rev, b)):
         print(f"{rev}: fastest {1e3 * min(times):.2f}, median "
               f"{1e3 * statistics.median(times):.2f} ms per step ("
@@ -341,7 +365,10 @@ def main(argv=None):
                    help="with --silo or --pour-bed: both revisions in one process, "
                         "windows alternating")
     p.add_argument("--tuning", nargs="+", default=[], metavar="NAME=VALUE",
-                   help="with --silo --interleaved: Tuning.with_ keywords of the silo's run")
+                   help="with --interleaved: Tuning.with_ keywords of both runs "
+                        "(the silo's tools/silo.py items, or the pour's)")
+    p.add_argument("--step-fraction", type=float, default=None,
+                   help="with --pour-bed --interleaved: the pour's step_fraction")
     args = p.parse_args(argv)
     if args.pour_seeds < 0 or (args.pour_seeds and not args.pour_bed):
         p.error("--pour-seeds takes a count >= 0 and needs --pour-bed")
@@ -353,8 +380,17 @@ def main(argv=None):
     if not (args.silo or args.interleaved) and (args.window is not None or
                                                 args.repeats is not None):
         p.error("--window and --repeats need --silo or --interleaved")
-    if args.tuning and not (args.interleaved and args.silo):
-        p.error("--tuning needs --silo --interleaved")
+    if args.tuning and not args.interleaved:
+        p.error("--tuning needs --interleaved")
+    if args.step_fraction is not None and not (args.interleaved and args.pour_bed):
+        p.error("--step-fraction needs --pour-bed --interleaved")
+    if args.step_fraction is not None:
+        try:
+            step_fraction_option(args.step_fraction)
+        except ValueError as exc:
+            p.error(f"--step-fraction: {exc}")
+    if args.tuning and args.pour_bed:
+        tuning_args(args.tuning, p)      # an error naming a bad item, before the runs
     if args.silo or args.interleaved:
         args.window = 0.1 if args.window is None else args.window
         args.repeats = 5 if args.repeats is None else args.repeats

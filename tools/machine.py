@@ -130,13 +130,12 @@ FORMER_DEFAULTS = dict(relaxation=1.0, position_iterations=100, substeps=False,
 
 def step_fraction_option(step_fraction) -> dict:
     """Simulation keywords for ``step_fraction`` (None: none, the Simulation's default);
-    ValueError unless it is a number in (0, 1], as the Simulation requires (checked
-    before a tool's first run)."""
+    ValueError unless it is a number in (0, 1] (simulation.check_step_fraction, the
+    Simulation's own check, run before a tool's first run)."""
+    from taichi_spheres.simulation import check_step_fraction
     if step_fraction is None:
         return {}
-    if isinstance(step_fraction, bool) or not isinstance(step_fraction, (int, float)) \
-            or not 0 < step_fraction <= 1:
-        raise ValueError(f"step_fraction must be in (0, 1], got {step_fraction!r}")
+    check_step_fraction(step_fraction)
     return {"step_fraction": step_fraction}
 
 
