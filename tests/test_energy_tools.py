@@ -105,11 +105,11 @@ def test_step_overlaps_and_settings_tradeoff_name_their_variants():
     row = dict(wall=0.9, brute=5e-5, velocity=60.0, position=58.0, kinetic=2e-6, ball=1e-3,
                ball_step=1, rise=0.0,
                fills=dict(bed=1.1, fastest=0.95, slowest=1.3, steps=450, fall=4.2,
-                          kinetic=[3e-6, 5e-7, 8e-7]))
+                          kinetic=[3e-6, 5e-7, 8e-7], overlaps=[4e-5, 9e-5, 2e-5]))
     text = settings_tradeoff.report(args, {"a": row})
     assert '`python tools/settings_tradeoff.py --variants "a=relaxation=1.5" --fills 3`' \
         in text
-    assert "| a | 0.9 | 1.1 (0.95-1.3) | 5.00e-05 | 60 / 58 | 2.0e-06 | " \
+    assert "| a | 0.9 | 1.1 (0.95-1.3) | 5.00e-05 | 9.00e-05 (4.0e-05) | 60 / 58 | 2.0e-06 | " \
         "8.0e-07 (5.0e-07-3.0e-06), 2 of 3 | 4.2 | 1.0e-03 (1) | 0.0e+00 |" in text
     assert "- a: `Tuning().with_(relaxation=1.5)`" in text
 

@@ -19,7 +19,9 @@ For each named setting (``NAME=FIELD=VALUE ...``: Tuning fields, and the Simulat
   (0: never; a dissipative scene, where it should never rise);
 - the pour's bed over ``--fills`` fills (the pour's ``seed`` 1..K, each run to 1 s,
   then its bed [1, 2] s timed with ``advance_to``): summed wall s per simulated s and
-  the range over the fills, the fall [0, 1] s summed likewise, and each fill's kinetic
+  the range over the fills, the fall [0, 1] s summed likewise, the largest overlap the
+  solver reported after a step of each bed (the bed run again step by step, untimed;
+  largest and median over the fills), and each fill's kinetic
   energy at 2 s / its initial energy (median, range, how many are at most 1e-6: a
   bed's K(2 s) scatters by 10-30x between fills). A bed is chaotic (a setting changes
   its trajectory, and one fill's bed takes +-20 % steps with it): the summed figures
@@ -85,10 +87,13 @@ def block_energy_rise(options: dict, steps: int = 150) -> float:
 def pour_fills(changes: dict, fills: int) -> dict:
     """The pour over fills seed = 1..fills under ``changes`` (simulation_options): its bed
     [1, 2] s (``bed``: summed wall s per simulated s, ``fastest`` and ``slowest`` fill,
-    ``steps`` summed), its fall [0, 1] s (``fall``: summed wall s per simulated s) and
-    the kinetic energy at 2 s / the initial energy (``kinetic``: one per fill)."""
+    ``steps`` summed), its fall [0, 1] s (``fall``: summed wall s per simulated s), the
+    kinetic energy at 2 s / the initial energy (``kinetic``: one per fill) and the
+    largest overlap the solver reported after a step of the bed / contact distance
+    (``overlaps``: one per fill; the bed run again from 1 s step by step, untimed: the
+    same steps, simulation.step_toward)."""
     text = open(os.path.join(ROOT, "scenes", "pour.toml")).read()
-    walls, falls, kinetic, steps = [], [], [], 0
+    walls, falls, kinetic, overlaps, steps = [], [], [], [], 0
     for seed in range(1, fills + 1):
         filled, found = re.subn(r"(?m)^seed = [0-9]+$", f"seed = {seed}", text)
         if found != 1:
@@ -104,14 +109,27 @@ def pour_fills(changes: dict, fills: int) -> dict:
         t0 = time.perf_counter()
         sim.advance_to(1.0)
         falls.append(time.perf_counter() - t0)
+        settled = sim.checkpoint()
         s0, t0 = sim.stats["steps"], time.perf_counter()
         sim.advance_to(2.0)
         walls.append(time.perf_counter() - t0)
         steps += sim.stats["steps"] - s0
         budget = sim.energy_budget()
         kinetic.append(budget["kinetic"] / budget["initial"])
+        overlaps.append(bed_overlap(sim, settled, 2.0))
     return dict(bed=sum(walls) / fills, fastest=min(walls), slowest=max(walls), steps=steps,
-                fall=sum(falls) / fills, kinetic=kinetic)
+                fall=sum(falls) / fills, kinetic=kinetic, overlaps=overlaps)
+
+
+def bed_overlap(sim, start, t_end: float) -> float:
+    """The largest overlap / contact distance the solver reported after any step from
+    checkpoint ``start`` to ``t_end`` [s] (stats' max_overlap of each step), stepping
+    as advance_to does."""
+    sim.restore(start)
+    worst = 0.0
+    while sim.step_toward(t_end) > 0:
+        worst = max(worst, sim.last_step["max_overlap"])
+    return worst
 
 
 def measure(name: str, changes: dict, every: int, fills: int) -> dict:
@@ -143,7 +161,8 @@ def report(args, rows) -> str:
              "Pour's bed [1, 2] s (steps one by one; brute-force overlap after "
              f"{'every step' if args.every == 1 else f'every {args.every}th step'})"
              + (f", and over {args.fills} fills (seed 1..{args.fills}; summed, and the "
-                "fastest and slowest fill; their kinetic energies at 2 s; their falls [0, 1] "
+                "fastest and slowest fill; their kinetic energies at 2 s; the largest overlap "
+                "the solver reported after a step of each bed; their falls [0, 1] "
                 "s summed)" if args.fills else "")
              + "; a ball 8x heavier dropped onto the settled 256-sphere block, "
              "frictionless, largest one-step growth of the total energy / its impact energy "
@@ -151,13 +170,14 @@ def report(args, rows) -> str:
              "settling from its lattice, largest rise of its total energy above the start "
              "/ the start (0: never):", "",
              "| settings | bed wall s / sim s | over the fills (fastest-slowest) | bed overlap "
-             "/ d, largest | sweeps per solve (velocity / position) | K(2 s) / E0 | K(2 s) / "
+             "/ d, largest | bed overlap / d over the fills: largest (median) | sweeps per "
+             "solve (velocity / position) | K(2 s) / E0 | K(2 s) / "
              "E0 over the fills: median (lowest-highest), fills at most 1e-6 | fall wall s / "
              "sim s over the fills | heavy ball: energy growth / impact energy (step) | "
              "block settling: energy rise |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for name, r in rows.items():
-        many = k_fills = fall = ""
+        many = k_fills = fall = o_fills = ""
         if r["fills"] is not None:
             f = r["fills"]
             many = f"{f['bed']:.3g} ({f['fastest']:.3g}-{f['slowest']:.3g})"
@@ -165,7 +185,9 @@ def report(args, rows) -> str:
             k = sorted(f["kinetic"])
             k_fills = (f"{statistics.median(k):.1e} ({k[0]:.1e}-{k[-1]:.1e}), "
                        f"{sum(x <= 1e-6 for x in k)} of {len(k)}")
-        lines.append(f"| {name} | {r['wall']:.3g} | {many} | {r['brute']:.2e} | "
+            o = f["overlaps"]
+            o_fills = f"{max(o):.2e} ({statistics.median(o):.1e})"
+        lines.append(f"| {name} | {r['wall']:.3g} | {many} | {r['brute']:.2e} | {o_fills} | "
                      f"{r['velocity']:.0f} / {r['position']:.0f} | {r['kinetic']:.1e} | {k_fills} | "
                      f"{fall} | "
                      f"{r['ball']:.1e} ({r['ball_step']}) | {r['rise']:.1e} |")
