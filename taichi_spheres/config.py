@@ -57,6 +57,14 @@ class Rules:
         warm friction impulse add energy: in a discharging silo that cut the friction
         the warm start carries from step to step (docs/algorithm.md).
     position_iterations: pseudo-velocity (split impulse) sweeps per step at most.
+    position_extension: more pseudo-velocity sweeps a step may run, at most, where its
+        capped pass left more than half of overlap_tolerance (its last sweep's largest
+        change x h over the smallest diameter, which tracks the largest overlap the
+        step leaves): they run until the pass converges or that many more ran (with
+        plain sweeps at the end, as the capped pass). 0 (default): none. Deep beds
+        whose longest steps leave overlaps above the tolerance at the cap then stay
+        within it, for more wall time where grains land (docs/bench.md,
+        "Position sweeps extended where a step leaves overlap").
     bounded_position_pass: with gravity, scale a step's pseudo-velocities down where
         they would lift spheres by more potential energy than the step's solve took
         out (kinetic energy removed, potential energy released by its moves), so that
@@ -124,6 +132,7 @@ class Rules:
     relaxation: float = 1.8
     plain_sweeps: int = 10
     position_iterations: int = 60
+    position_extension: int = 0
     bounded_position_pass: bool = False
     overlap_tolerance: float = 1e-4
     shock_propagation: str = "auto"
@@ -149,7 +158,7 @@ class Rules:
         if not 0 < self.relaxation < 2:
             raise ValueError(f"tuning relaxation must be in (0, 2), got {self.relaxation!r}")
         _require_at_least(self, ("contact_iterations", "position_iterations"), 1)
-        _require_at_least(self, ("plain_sweeps",), 0)
+        _require_at_least(self, ("plain_sweeps", "position_extension"), 0)
         _require_at_least(self, ("min_scaled_sweeps",), 1)
         for name in ("substeps", "bounded_position_pass", "step_scaled_sweeps"):
             if not isinstance(getattr(self, name), bool):
@@ -317,7 +326,7 @@ KERNEL_VARIANTS = ("solver_interleave", "frictional_interleave", "parallel_inter
 #: Simulation binds its engine (contacts/solver.py ContactSolver.load_sweep_rules):
 #: Simulations that differ only in these share compiled engines
 SOLVER_VALUES = ("relaxation", "contact_iterations", "position_iterations", "plain_sweeps",
-                 "min_scaled_sweeps")
+                 "min_scaled_sweeps", "position_extension")
 
 
 def field_types() -> dict:

@@ -313,6 +313,27 @@ def test_overlap_recovery_moves_positions_not_velocities(arch, shock):
     assert np.abs(st.v).max() <= 1e-6
 
 
+def test_position_extension_removes_what_a_capped_pass_leaves(arch):
+    """The pressed column of the last test with 3 position sweeps per step: the first
+    step leaves most of its overlap; with Rules.position_extension the pass runs on
+    until what it leaves is within half the overlap tolerance, in positions only (the
+    velocities keep their bits)."""
+    scene = _column(10)
+    x = scene.x.copy()
+    x[:, 2] = 0.95 * R + 0.95 * 2 * R * np.arange(10)
+    out = {}
+    for extension in (0, 400):
+        sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(
+            position_iterations=3, position_extension=extension))
+        sim.set_state(x, np.zeros_like(x))
+        sim.advance(sim.max_step())
+        out[extension] = (sim.last_step["max_overlap"], sim.last_step["position_iterations"],
+                          sim.state().v)
+    assert out[0][0] > 1e-2 and out[0][1] == 3
+    assert out[400][0] <= 0.5e-4 and 3 < out[400][1] <= 403
+    assert np.array_equal(out[0][2], out[400][2])
+
+
 def test_solver_conserves_momentum_without_walls(arch):
     """Two touching clusters drifting into each other slowly in a periodic box with a
     rest speed and no gravity: impacts and contact rows keep momentum."""
@@ -373,7 +394,7 @@ def test_sweep_rules_share_the_engine_and_keep_their_bits(arch, precision):
 @pytest.mark.parametrize("case", [
     "fcc block", "odd periodic colours, plain sweeps", "fcc block, 15 sweeps",
     pytest.param("fcc block, 15 sweeps, bounded position pass", marks=pytest.mark.slow),
-    "fcc block, 15 sweeps scaled with the step"])
+    "fcc block, 15 sweeps scaled with the step", "fcc block, 5 position sweeps extended"])
 def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     """The one-launch serial solver and the per-colour parallel launches (forced with
     serial_heavy_below = serial_solver_below = 0), each with one cell per sweep loop
@@ -386,7 +407,8 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     sweeps, relaxation 1); with a cap of 15 sweeps, 10 of them plain, solves also stop
     inside the plain ones (and the bounded position pass sums its energies in the same
     order on both paths), and with caps scaled with each step's length
-    (Rules.step_scaled_sweeps) both paths take the same caps."""
+    (Rules.step_scaled_sweeps) both paths take the same caps; with 5 position sweeps
+    extended (Rules.position_extension) both run the same extra sweeps."""
     scene, seconds = ((_periodic_layer_scene(), 0.2) if case.startswith("odd periodic")
                       else (fcc_block(4), 0.3))
     rules = dict(relaxation=1.0) if "plain" in case else {}
@@ -396,6 +418,8 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
         rules.update(bounded_position_pass=True)
     if "scaled" in case:       # caps that change from step to step
         rules.update(step_scaled_sweeps=True, min_scaled_sweeps=2)
+    if "extended" in case:     # a cap that the pressed block's first passes overrun
+        rules.update(position_iterations=5, position_extension=40)
     out, sweeps = [], []
     # (below, interleave, batch): both paths, then the interleaving and batching
     # variants where they meet something of their own (every variant on the plain FCC
@@ -408,13 +432,17 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
     elif case.startswith("odd periodic"):
         configs += ((0, 3, 1), (0, 1, 7))
     elif "bounded" not in case:
-        configs += ((0, 8, 4),)     # a batch of 4 does not divide the cap of 15
+        configs += ((0, 8, 4),)     # a batch of 4 does not divide the cap of 15 (or 5)
     solvers = {}
     for below, interleave, batch in configs:
         sim = ts.Simulation(scene, arch=arch, tuning=Tuning().with_(
             serial_heavy_below=below, serial_solver_below=below, solver_interleave=interleave,
             parallel_interleave=interleave, sweeps_per_wait=batch,
             gpu_sweeps_per_wait=batch, **rules))
+        if "extended" in case:     # layers pressed 2 % of a diameter into each other
+            x = scene.x.copy()
+            x[:, 2] = R + 0.98 * (x[:, 2] - R)
+            sim.set_state(x, scene.v)
         counts = []
         quiet = ((sim.tuning.physics.contact_margin - 1) * sim.step_fraction *
                  float(scene.radius.min()) / sim.rest_speed)
@@ -441,6 +469,8 @@ def test_serial_and_parallel_solver_give_the_same_bits(arch, case):
         assert sweeps[0][0][0] > 4      # but not the first, cold one (no warm start)
         assert any(vel == 3 for vel, _ in sweeps[0][3::3])
         assert all(vel <= 4 for vel, _ in sweeps[0][3::3])
+    if "extended" in case:
+        assert any(pos > 5 for _, pos in sweeps[0])
     assert len(set(out)) == 1
     assert all(counts == sweeps[0] for counts in sweeps)
     if case == "fcc block, 15 sweeps":   # some solves stopped inside the plain last sweeps

@@ -270,11 +270,13 @@ class GaussSeidel:
 
     @ti.func
     def set_tolerances(self):
-        """This step's convergence tolerances (tol_v, tol_w) [m/s] and sweep caps
-        (cap_v, cap_w; plain_v, plain_w: the plain sweeps that end them) (kernel top
-        level)."""
+        """This step's convergence tolerances (tol_v, tol_w) [m/s], the position
+        residual above which Rules.position_extension's sweeps run (tol_x: half of
+        overlap_tolerance of the smallest diameter per step) and sweep caps (cap_v,
+        cap_w; plain_v, plain_w: the plain sweeps that end them) (kernel top level)."""
         self.tol_v[None] = ti.static(self.rules.contact_tolerance) * self.impact_speed()
         self.tol_w[None] = self.tol_len[None] / self.params.h[None]
+        self.tol_x[None] = 5 * self.tol_len[None] / self.params.h[None]   # (tol_len: 1/10)
         self.set_cap(self.cap_v, self.plain_v, self.full_v[None])
         self.set_cap(self.cap_w, self.plain_w, self.full_w[None])
 

@@ -45,7 +45,10 @@ pgs.sweep_cells). Iterations stop when no row changed a velocity by more than
 ``Rules.contact_tolerance`` x the impact speed (or the positions by more than a tenth
 of ``Rules.overlap_tolerance`` of the smallest diameter), at most
 ``Rules.contact_iterations`` / ``position_iterations`` (with
-``Rules.step_scaled_sweeps``, caps scaled to the step: pgs.set_cap).
+``Rules.step_scaled_sweeps``, caps scaled to the step: pgs.set_cap); a position pass
+whose last sweep still changed the positions by more than half of
+``Rules.overlap_tolerance`` of the smallest diameter runs up to
+``Rules.position_extension`` more sweeps (0 by default: none).
 
 A mixin-free class over the engine's state, grid, parameters and pair geometry.
 """
@@ -205,6 +208,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         # this step's sweep caps and plain sweeps (velocity, position: pgs.set_cap)
         self.cap_v = ti.field(ti.i32, shape=())
         self.cap_w = ti.field(ti.i32, shape=())
+        # Rules.position_extension: its sweeps, and the residual above which they run
+        # (half of overlap_tolerance of the smallest diameter per step) [m/s]
+        self.cap_x = ti.field(ti.i32, shape=())
+        self.tol_x = ti.field(self.real, shape=())
         self.plain_v = ti.field(ti.i32, shape=())
         self.plain_w = ti.field(ti.i32, shape=())
         self.quiet_len = ti.field(self.real, shape=())    # (contact_margin - 1) D [m] (bind)
@@ -276,6 +283,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.relax_on[None] = int(rules.relaxation != 1)
         self.full_v[None] = rules.contact_iterations
         self.full_w[None] = rules.position_iterations
+        self.cap_x[None] = rules.position_extension
         self.plain_sweeps[None] = rules.plain_sweeps
         self.min_scaled[None] = rules.min_scaled_sweeps
 
@@ -485,8 +493,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
                 self.shock_pass()
             self.position_targets()
         elif ti.static(stage == 6):
-            self.params.position_iterations[None] = self.iterate_serially(
-                POSITION, self.cap_w, self.plain_w, self.tol_w)
+            n = self.iterate_serially(POSITION, self.cap_w, self.plain_w, self.tol_w)
+            if self.cap_x[None] > 0 and self.residual[None] > self.tol_x[None]:
+                n += self.iterate_serially(POSITION, self.cap_x, self.plain_w, self.tol_w)
+            self.params.position_iterations[None] = n
         else:
             self.finish()
 
@@ -598,7 +608,9 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         """The one-sweep kernel of ``mode`` for the bound colour count and parallel
         interleave (built once each: load_host_options); ``batched``: (caps, last, tol)
         of a batched solve, whose sweep kernel it is."""
-        key = (mode, self.n_colours, batched is not None, self.interleave_parallel)
+        # (a batched kernel reads its caps, plain sweeps and tolerance fields: one per set)
+        key = (mode, self.n_colours, None if batched is None else tuple(map(id, batched)),
+               self.interleave_parallel)
         if key not in self._sweeps:
             self._sweeps[key] = (self._sweep_kernel(mode, self.n_colours) if batched is None
                                  else self._batched_kernel(mode, self.n_colours, *batched))
@@ -622,6 +634,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.params.contact_residual[None] = self.residual[None]
         self._middle()
         positions = self._iterate(POSITION, self.cap_w, self.plain_w, self.tol_w)
+        if self.cap_x[None] > 0 and self.residual[None] > self.tol_x[None]:
+            positions += self._iterate(POSITION, self.cap_x, self.plain_w, self.tol_w)
         self._end(iterations, positions)
 
     def _iterate(self, mode, caps, last, tol) -> int:
