@@ -88,8 +88,10 @@ def estimate_field_bytes(scene: Scene, precision: str = "f64",
 
 
 def field_bytes_for(spheres: int, cells: int, features: Features, near_lists: bool,
-                    precision: str, perf: Performance = DEFAULT.performance) -> int:
-    """Bytes of an engine's fields with room for ``spheres`` and ``cells`` [bytes]."""
+                    precision: str, perf: Performance = DEFAULT.performance,
+                    cpu: bool = True) -> int:
+    """Bytes of an engine's fields with room for ``spheres`` and ``cells`` [bytes] (``cpu``:
+    an engine on the CPU, whose contact solver also lists its rows for its sweeps)."""
     real = 8 if precision == "f64" else 4
     # x, v, grid.xs, projection push (4 vec3), moved, earliest, projection rmax; hits,
     # marked, touched, order, cell_of, slot, projection involved/near/stamp
@@ -105,6 +107,8 @@ def field_bytes_for(spheres: int, cells: int, features: Features, near_lists: bo
             + perf.warm_slots * (4 + real) + 4 * 4
         if features.gravity:
             per_sphere += real      # drop (ContactSolver.close_support_gaps)
+        if cpu:
+            per_sphere += perf.contacts_per_sphere * 4    # schedule (pgs.schedule_rows)
         per_cell += 4 * 4   # cell_count, cell_fill, cell_start, active_cells
     return spheres * per_sphere + cells * per_cell
 
@@ -135,15 +139,15 @@ def check_step_fraction(step_fraction) -> float:
     """``step_fraction`` (a Simulation's largest move per step / smallest radius) as a
     float; ValueError unless it is a number in (0, 1] (a bool or a string is not). The
     one check of a Simulation's argument and of the tools' options."""
-    message = f"step_fraction must be a number in (0, 1], got {step_fraction!r}"
-    if isinstance(step_fraction, (bool, str)):
-        raise ValueError(message)
+    message = "step_fraction must be a number in (0, 1], got {!r}"
+    if isinstance(step_fraction, (bool, np.bool_, str, bytes, bytearray)):
+        raise ValueError(message.format(step_fraction))
     try:
         value = float(step_fraction)
     except (TypeError, ValueError):
-        raise ValueError(message) from None
+        raise ValueError(message.format(step_fraction)) from None
     if not 0.0 < value <= 1.0:
-        raise ValueError(message)
+        raise ValueError(message.format(value))
     return value
 
 

@@ -168,6 +168,7 @@ def test_over_relaxed_sweeps_hold_the_heavy_on_light_column(arch, precision):
                                          ("gpu_sweeps_per_wait", 0),
                                          ("contact_iterations", 0),
                                          ("position_iterations", 0), ("plain_sweeps", -1),
+                                         ("position_extension", -1),
                                          ("shock_propagation", "always"),
                                          ("bounded_position_pass", 1)])
 def test_solver_rules_out_of_range_name_the_field(name, value):
@@ -315,9 +316,9 @@ def test_overlap_recovery_moves_positions_not_velocities(arch, shock):
 
 def test_position_extension_removes_what_a_capped_pass_leaves(arch):
     """The pressed column of the last test with 3 position sweeps per step: the first
-    step leaves most of its overlap; with Rules.position_extension the pass runs on
-    until what it leaves is within half the overlap tolerance, in positions only (the
-    velocities keep their bits)."""
+    step leaves most of its overlap; with Rules.position_extension the pass, stopped at
+    its cap with more than half the overlap tolerance left, runs on until it converges,
+    in positions only (the velocities keep their bits)."""
     scene = _column(10)
     x = scene.x.copy()
     x[:, 2] = 0.95 * R + 0.95 * 2 * R * np.arange(10)
@@ -358,12 +359,12 @@ def test_solver_conserves_momentum_without_walls(arch):
 
 def test_sweep_rules_share_the_engine_and_keep_their_bits(arch, precision):
     """The sweep rules (config.SOLVER_VALUES: relaxation, sweep caps, plain sweeps,
-    fewest scaled sweeps) are values the kernels read from fields: Simulations that
+    fewest scaled sweeps, position extension) are values the kernels read from fields: Simulations that
     differ only in them run on one engine, each under its own rules (a cap of 3
     velocity sweeps holds where the defaults run more), with the bits each gives alone,
     whichever ran in between."""
     capped = Tuning().with_(relaxation=1.0, contact_iterations=3, position_iterations=2,
-                            plain_sweeps=1, min_scaled_sweeps=1)
+                            plain_sweeps=1, min_scaled_sweeps=1, position_extension=5)
     assert capped.compiled() == Tuning().compiled()
     scene = fcc_block(3)
 

@@ -575,7 +575,7 @@ def test_physics_table_sets_the_simulations_run_settings(tmp_path, arch):
     assert (sim.step_fraction, sim.max_sweeps) == (0.15, 8)
     sim = ts.Simulation(chosen, arch=arch, step_fraction=0.05, max_sweeps=4)
     assert (sim.step_fraction, sim.max_sweeps) == (0.05, 4)
-    for bad in ("fast", "0.15", True, 0.0, 1.5, float("nan")):
+    for bad in ("fast", "0.15", True, np.True_, b"0.1", 0.0, 1.5, float("nan")):
         with pytest.raises(ValueError, match=r"step_fraction must be a number in \(0, 1\]"):
             ts.Simulation(chosen, arch=arch, step_fraction=bad)
 

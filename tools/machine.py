@@ -132,11 +132,10 @@ def step_fraction_option(step_fraction) -> dict:
     """Simulation keywords for ``step_fraction`` (None: none, the Simulation's default);
     ValueError unless it is a number in (0, 1] (simulation.check_step_fraction, the
     Simulation's own check, run before a tool's first run)."""
-    from taichi_spheres.simulation import check_step_fraction
     if step_fraction is None:
         return {}
-    check_step_fraction(step_fraction)
-    return {"step_fraction": step_fraction}
+    from taichi_spheres.simulation import check_step_fraction
+    return {"step_fraction": check_step_fraction(step_fraction)}
 
 
 def tuning_code(changes: dict) -> str:

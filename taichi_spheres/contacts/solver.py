@@ -114,6 +114,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         active_cells: (M,) i32, colour_active: (MAX_COLOURS + 1,) i32 — the cells that
             own rows, colour by colour (pgs.list_active_cells); colour_fill:
             (MAX_COLOURS,) i32 its counts
+        schedule: (K,) i32, schedule_start: (MAX_COLOURS + 1,) i32, only on the CPU —
+            the rows in the serial sweeps' order, colour by colour (pgs.schedule_rows)
         scan_bufs: cell_start and the block sums of its scan (grid.scan_buffers)
         staged: (K,) vec3 i32, only on serial engines — the rows in the order the
             gathering found them: owner cell, a, b (rows.py gather); n_staged their count
@@ -212,6 +214,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         # (half of overlap_tolerance of the smallest diameter per step) [m/s]
         self.cap_x = ti.field(ti.i32, shape=())
         self.tol_x = ti.field(self.real, shape=())
+        self.cap_p = ti.field(ti.i32, shape=())      # the running position pass's cap
         self.plain_v = ti.field(ti.i32, shape=())
         self.plain_w = ti.field(ti.i32, shape=())
         self.quiet_len = ti.field(self.real, shape=())    # (contact_margin - 1) D [m] (bind)
@@ -284,6 +287,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.full_v[None] = rules.contact_iterations
         self.full_w[None] = rules.position_iterations
         self.cap_x[None] = rules.position_extension
+        self.extension = rules.position_extension
         self.plain_sweeps[None] = rules.plain_sweeps
         self.min_scaled[None] = rules.min_scaled_sweeps
 
@@ -493,12 +497,26 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
                 self.shock_pass()
             self.position_targets()
         elif ti.static(stage == 6):
-            n = self.iterate_serially(POSITION, self.cap_w, self.plain_w, self.tol_w)
-            if self.cap_x[None] > 0 and self.residual[None] > self.tol_x[None]:
-                n += self.iterate_serially(POSITION, self.cap_x, self.plain_w, self.tol_w)
-            self.params.position_iterations[None] = n
+            self.params.position_iterations[None] = self.position_pass_serially()
         else:
             self.finish()
+
+    @ti.func
+    def position_pass_serially(self):
+        """The position sweeps (iterate_serially, capped at cap_w), and where they stop at
+        the cap with a residual above tol_x, up to cap_x more (Rules.position_extension;
+        one inlined copy of the sweeps); returns the sweeps run."""
+        self.cap_p[None] = self.cap_w[None]
+        n = 0
+        rounds = 0
+        while rounds >= 0:
+            n += self.iterate_serially(POSITION, self.cap_p, self.plain_w, self.tol_w)
+            rounds += 1
+            if rounds == 1 and self.cap_x[None] > 0 and self.residual[None] > self.tol_x[None]:
+                self.cap_p[None] = self.cap_x[None]
+            else:
+                rounds = -1
+        return n
 
     def _build_kernels(self):
         """The kernels solve() launches (plain closures: no per-launch `self` dispatch)."""
@@ -634,7 +652,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         self.params.contact_residual[None] = self.residual[None]
         self._middle()
         positions = self._iterate(POSITION, self.cap_w, self.plain_w, self.tol_w)
-        if self.cap_x[None] > 0 and self.residual[None] > self.tol_x[None]:
+        if self.extension > 0 and self.residual[None] > self.tol_x[None]:
             positions += self._iterate(POSITION, self.cap_x, self.plain_w, self.tol_w)
         self._end(iterations, positions)
 
