@@ -109,7 +109,8 @@ def test_step_overlaps_and_settings_tradeoff_name_their_variants():
     text = settings_tradeoff.report(args, {"a": row})
     assert '`python tools/settings_tradeoff.py --variants "a=relaxation=1.5" --fills 3`' \
         in text
-    assert "| a | 0.9 | 1.1 (0.95-1.3) | 5.00e-05 | 9.00e-05 (4.0e-05) | 60 / 58 | 2.0e-06 | " \
+    assert "| a | 0.9 | 1.1 (0.95-1.3) | 5.00e-05 | 9.00e-05 (4.0e-05), 0 of 3 | 60 / 58 | " \
+        "2.0e-06 | " \
         "8.0e-07 (5.0e-07-3.0e-06), 2 of 3 | 4.2 | 1.0e-03 (1) | 0.0e+00 |" in text
     assert "- a: `Tuning().with_(relaxation=1.5)`" in text
 
@@ -271,3 +272,23 @@ def test_a_variants_step_fraction_reaches_every_simulation_it_builds(monkeypatch
     assert len(seen) == 5
     assert all(k["step_fraction"] == 0.2 for k in seen)
     assert all(k["tuning"].physics.position_iterations == 100 for k in seen)
+
+
+def test_settings_tradeoff_bed_overlap_is_the_largest_after_any_step():
+    """bed_overlap restores the checkpoint and steps to the end, keeping the largest
+    overlap a step reported."""
+    class Steps:
+        def __init__(self):
+            self.left, self.last_step, self.restored = [2e-5, 9e-5, 4e-5], {}, None
+
+        def restore(self, checkpoint):
+            self.restored = checkpoint
+
+        def step_toward(self, t_end):
+            if not self.left:
+                return 0.0
+            self.last_step = {"max_overlap": self.left.pop(0)}
+            return 0.01
+    sim = Steps()
+    assert settings_tradeoff.bed_overlap(sim, "at 1 s", 2.0) == 9e-5
+    assert sim.restored == "at 1 s" and not sim.left

@@ -170,7 +170,8 @@ def report(args, rows) -> str:
              "settling from its lattice, largest rise of its total energy above the start "
              "/ the start (0: never):", "",
              "| settings | bed wall s / sim s | over the fills (fastest-slowest) | bed overlap "
-             "/ d, largest | bed overlap / d over the fills: largest (median) | sweeps per "
+             "/ d, largest | bed overlap / d over the fills: largest (median), fills above "
+             "1e-4 | sweeps per "
              "solve (velocity / position) | K(2 s) / E0 | K(2 s) / "
              "E0 over the fills: median (lowest-highest), fills at most 1e-6 | fall wall s / "
              "sim s over the fills | heavy ball: energy growth / impact energy (step) | "
@@ -186,7 +187,8 @@ def report(args, rows) -> str:
             k_fills = (f"{statistics.median(k):.1e} ({k[0]:.1e}-{k[-1]:.1e}), "
                        f"{sum(x <= 1e-6 for x in k)} of {len(k)}")
             o = f["overlaps"]
-            o_fills = f"{max(o):.2e} ({statistics.median(o):.1e})"
+            o_fills = (f"{max(o):.2e} ({statistics.median(o):.1e}), "
+                       f"{sum(x > 1e-4 for x in o)} of {len(o)}")
         lines.append(f"| {name} | {r['wall']:.3g} | {many} | {r['brute']:.2e} | {o_fills} | "
                      f"{r['velocity']:.0f} / {r['position']:.0f} | {r['kinetic']:.1e} | {k_fills} | "
                      f"{fall} | "
