@@ -14,6 +14,7 @@ import pytest
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
 
 import bed_energy  # noqa: E402  (tools/bed_energy.py)
+import bed_steps  # noqa: E402  (tools/bed_steps.py)
 import silo_seeds  # noqa: E402  (tools/silo_seeds.py)
 import row_activity  # noqa: E402  (tools/row_activity.py)
 import solver_convergence  # noqa: E402  (tools/solver_convergence.py)
@@ -38,6 +39,9 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (settings_tradeoff, ["--variants", "long=step_fraction=True"],
      "variant 'long': step_fraction must be a number in (0, 1], got True"),
     (silo_overlaps, ["--first", "0"], "--first must be >= 1"),
+    (bed_steps, ["--start", "2"], "--start must be >= 0 and < --end"),
+    (bed_steps, ["--step-fraction", "0"], "step_fraction must be a number in (0, 1]"),
+    (bed_steps, ["--tuning", "relax=1"], "unknown tuning field 'relax'"),
     (row_activity, ["--at", "-1"], "--at times must be >= 0"),
     (row_activity, ["--threshold", "1"], "--threshold must be in [0, 1)"),
     (row_activity, ["--scene", os.path.join(os.path.dirname(__file__), "..", "scenes",
@@ -292,3 +296,31 @@ def test_settings_tradeoff_bed_overlap_is_the_largest_after_any_step():
     sim = Steps()
     assert settings_tradeoff.bed_overlap(sim, "at 1 s", 2.0) == 9e-5
     assert sim.restored == "at 1 s" and not sim.left
+
+
+def test_bed_steps_lists_the_steps_above_the_threshold_with_their_position_pass():
+    """bed_steps.steps_above: each step leaving more than the threshold, with its sweeps,
+    its position cap and the position residual x h / d; and the largest overlap."""
+    field = lambda value: {None: value}     # noqa: E731  (a 0-d field's [None])
+    solver = types.SimpleNamespace(cap_w=field(100), residual=field(0.0))
+    steps = [dict(h=0.01, max_overlap=5e-5, contact_iterations=40, position_iterations=30),
+             dict(h=0.02, max_overlap=2e-4, contact_iterations=100, position_iterations=100)]
+
+    class Sim:
+        scene = types.SimpleNamespace(radius=np.array([0.01, 0.02]))
+        time, last_step = 1.0, {}
+
+        def debug_view(self):
+            return types.SimpleNamespace(solver=solver)
+
+        def step_toward(self, t_end):
+            if not steps:
+                return 0.0
+            self.last_step = steps.pop(0)
+            self.time += self.last_step["h"]
+            solver.residual[None] = 3e-4 if self.last_step["h"] > 0.015 else 1e-5
+            return self.last_step["h"]
+    rows, worst = bed_steps.steps_above(Sim(), 2.0, 1e-4)
+    assert worst == 2e-4
+    assert rows == [(pytest.approx(1.03), 0.02, 100, 100, 100,
+                     pytest.approx(3e-4 * 0.02 / 0.02), 2e-4)]

@@ -34,10 +34,8 @@ from __future__ import annotations
 import argparse
 import datetime
 import os
-import re
 import statistics
 import sys
-import tempfile
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -51,6 +49,7 @@ from machine import FORMER_DEFAULTS, cpu_name, publish, tuning_text  # noqa: E40
 from step_overlaps import (parse_variant, run, simulation_options,  # noqa: E402
                            variant_text)  # (tools/step_overlaps.py)
 from warm_start_energy import drop, settled_block  # noqa: E402
+from bed_steps import pour_fill  # noqa: E402  (tools/bed_steps.py)
 
 #: --variants default: the former defaults, and over-relaxed sweeps with substeps at
 #: several caps (the defaults are 100 / 60)
@@ -92,17 +91,9 @@ def pour_fills(changes: dict, fills: int) -> dict:
     largest overlap the solver reported after a step of the bed / contact distance
     (``overlaps``: one per fill; the bed run again from 1 s step by step, untimed: the
     same steps, simulation.step_toward)."""
-    text = open(os.path.join(ROOT, "scenes", "pour.toml")).read()
     walls, falls, kinetic, overlaps, steps = [], [], [], [], 0
     for seed in range(1, fills + 1):
-        filled, found = re.subn(r"(?m)^seed = [0-9]+$", f"seed = {seed}", text)
-        if found != 1:
-            raise RuntimeError("scenes/pour.toml has no single 'seed = N' line to vary")
-        with tempfile.NamedTemporaryFile("w", suffix=".toml") as f:
-            f.write(filled)
-            f.flush()
-            scene = ts.load_scene(f.name)
-        sim = ts.Simulation(scene, threads=1, **simulation_options(changes))
+        sim = ts.Simulation(pour_fill(seed), threads=1, **simulation_options(changes))
         start = sim.checkpoint()            # one untimed step compiles (or loads) the
         sim.advance(sim.max_step())         # step's kernels; the fill then starts anew
         sim.restore(start)
