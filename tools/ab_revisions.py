@@ -67,7 +67,7 @@ ROOT = os.path.abspath(os.path.join(HERE, ".."))
 sys.path.insert(0, ROOT)
 sys.path.insert(0, HERE)
 
-from machine import step_fraction_option, tuning_args  # noqa: E402  (tools/machine.py)
+from machine import step_fraction_arg, tuning_args  # noqa: E402  (tools/machine.py)
 
 
 def checkout(rev: str, where: str) -> str:
@@ -384,11 +384,7 @@ def main(argv=None):
         p.error("--tuning needs --interleaved")
     if args.step_fraction is not None and not (args.interleaved and args.pour_bed):
         p.error("--step-fraction needs --pour-bed --interleaved")
-    if args.step_fraction is not None:
-        try:
-            step_fraction_option(args.step_fraction)
-        except ValueError as exc:
-            p.error(f"--step-fraction: {exc}")
+    step_fraction_arg(args.step_fraction, p)
     if args.tuning and args.pour_bed:
         tuning_args(args.tuning, p)      # an error naming a bad item, before the runs
     if args.silo or args.interleaved:

@@ -29,7 +29,7 @@ sys.path.insert(0, HERE)
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
-from machine import cpu_name, step_fraction_option, tuning_args  # noqa: E402
+from machine import cpu_name, step_fraction_arg, tuning_args  # noqa: E402
 
 
 def pour_fill(seed: int):
@@ -73,10 +73,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if not 0 <= args.start < args.end:
         ap.error("--start must be >= 0 and < --end")
-    try:
-        options = step_fraction_option(args.step_fraction)
-    except ValueError as exc:
-        ap.error(f"--step-fraction: {exc}")
+    options = step_fraction_arg(args.step_fraction, ap)
     tuning = tuning_args(args.tuning, ap)
     sim = ts.Simulation(pour_fill(args.seed), threads=1, precision="f64",
                         tuning=Tuning().with_(**tuning), **options)

@@ -138,6 +138,15 @@ def step_fraction_option(step_fraction) -> dict:
     return {"step_fraction": check_step_fraction(step_fraction)}
 
 
+def step_fraction_arg(step_fraction, ap) -> dict:
+    """step_fraction_option of a --step-fraction option, or the parser's error naming
+    it."""
+    try:
+        return step_fraction_option(step_fraction)
+    except ValueError as exc:
+        ap.error(f"--step-fraction: {exc}")
+
+
 def tuning_code(changes: dict) -> str:
     """Tuning.with_ keywords as the code that builds them: ``Tuning().with_(k=v, ...)``."""
     return "Tuning().with_(" + ", ".join(f"{k}={v!r}" for k, v in changes.items()) + ")"

@@ -79,7 +79,7 @@ ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from machine import step_fraction_option, tuning_args, tuning_code  # noqa: E402
+from machine import step_fraction_arg, step_fraction_option, tuning_args, tuning_code  # noqa: E402
 
 RADIUS = 0.015       # m
 DENSITY = 1000.0     # kg/m^3
@@ -886,10 +886,7 @@ def scene_args(args, ap):
     if args.tuning and args.out is None:
         ap.error("--tuning needs --out: the default report is for the default settings")
     if args.step_fraction is not None:
-        try:
-            step_fraction_option(args.step_fraction)
-        except ValueError as exc:
-            ap.error(f"--step-fraction: {exc}")
+        step_fraction_arg(args.step_fraction, ap)
         if args.out is None:
             ap.error("--step-fraction needs --out: the default report is for the default "
                      "settings")
