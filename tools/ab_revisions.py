@@ -154,10 +154,11 @@ print("windows", *times)
 
 
 #: --interleaved: run in this checkout; argv: the two worktrees, "silo" or "pour",
-#: window [s], repeats, the pour's step_fraction ("none": the default) and the --tuning
-#: items (silo: tools/silo.py's; pour: Tuning.with_ keywords)
+#: window [s], repeats, the pour's step_fraction ("none": the default), then the silo's
+#: --tuning items (tools/silo.py's) or the pour's Tuning.with_ keywords as one Python
+#: literal (machine.tuning_args's dict)
 INTERLEAVED = """
-import importlib.util, sys, time
+import ast, importlib.util, sys, time
 sys.path.insert(0, "tools")
 tree_a, tree_b, what = sys.argv[1:4]
 window, repeats = float(sys.argv[4]), int(sys.argv[5])
@@ -201,14 +202,7 @@ if what == "silo":
     sims = [silo.discharging(a, settled, a.orifice * a.radius) for silo in (silo_a, silo_b)]
     start = 0.2
 else:
-    import ast
-    changes = {}
-    for item in tuning:
-        name, _, text = item.partition("=")
-        try:
-            changes[name] = ast.literal_eval(text)
-        except (ValueError, SyntaxError):
-            changes[name] = text
+    changes = ast.literal_eval(tuning[0])
     extra = {} if fraction == "none" else {"step_fraction": float(fraction)}
     sims = [ts.Simulation(ts.load_scene("scenes/pour.toml"), threads=1,
                           tuning=ts.config.Tuning().with_(**changes), **extra)
@@ -238,12 +232,13 @@ def interleaved(trees: tuple, what: str, window: float, repeats: int, tuning=(),
                 step_fraction=None) -> tuple:
     """([A's wall s per step per window], [B's], (A's steps, B's)) of ``window`` s of
     the silo's discharge (``what`` "silo") or the pour's bed ("pour"), both revisions'
-    windows alternating in one process (``tuning``: --tuning items, tools/silo.py's
-    or, for the pour, Tuning.with_ keywords; ``step_fraction``: the pour's, None for
-    the default)."""
+    windows alternating in one process (``tuning``: the silo's --tuning items,
+    tools/silo.py's, or the pour's Tuning.with_ keywords, a dict; ``step_fraction``:
+    the pour's, None for the default)."""
     fraction = "none" if step_fraction is None else repr(step_fraction)
+    tail = [repr(dict(tuning))] if what == "pour" else list(tuning)
     out = subprocess.run([sys.executable, "-c", INTERLEAVED, *trees, what, str(window),
-                          str(repeats), fraction, *tuning], capture_output=True, text=True,
+                          str(repeats), fraction, *tail], capture_output=True, text=True,
                          cwd=ROOT)
     if out.returncode != 0:
         raise RuntimeError(f"the interleaved run failed:\n{out.stderr[-3000:]}")
@@ -385,8 +380,8 @@ def main(argv=None):
     if args.step_fraction is not None and not (args.interleaved and args.pour_bed):
         p.error("--step-fraction needs --pour-bed --interleaved")
     step_fraction_arg(args.step_fraction, p)
-    if args.tuning and args.pour_bed:
-        tuning_args(args.tuning, p)      # an error naming a bad item, before the runs
+    if args.pour_bed:       # keywords, or an error naming a bad item, before the runs
+        args.tuning = tuning_args(args.tuning, p)
     if args.silo or args.interleaved:
         args.window = 0.1 if args.window is None else args.window
         args.repeats = 5 if args.repeats is None else args.repeats
