@@ -29,6 +29,7 @@ from . import engine as engines
 from . import runtime
 from .config import DEFAULT, Performance, Tuning
 from .contacts import near_allowance
+from .contacts.packed import packed_row_bytes, packs_rows
 from .grid import GridGeometry
 from . import discharge, observe, stepping
 from .scene import Scene
@@ -109,6 +110,8 @@ def field_bytes_for(spheres: int, cells: int, features: Features, near_lists: bo
             per_sphere += real      # drop (ContactSolver.close_support_gaps)
         if cpu:
             per_sphere += perf.contacts_per_sphere * 4    # schedule (pgs.schedule_rows)
+        if packs_rows(features, spheres, cpu):             # contacts/packed.py
+            per_sphere += perf.contacts_per_sphere * packed_row_bytes(real)
         per_cell += 4 * 4   # cell_count, cell_fill, cell_start, active_cells
     return spheres * per_sphere + cells * per_cell
 

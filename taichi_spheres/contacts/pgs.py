@@ -1,7 +1,8 @@
 """Projected Gauss–Seidel sweeps of the contact solver (contacts/solver.py): one
 update per row, cells of one colour in parallel (on the CPU a few of them per thread,
 interleaved: sweep_cells), colours in turn. A serial solve sweeps one list of the rows
-in that same order (schedule_rows, sweep_scheduled): the same bits.
+in that same order (schedule_rows, sweep_scheduled), from packed copies of the rows
+where it has them (contacts/packed.py): the same bits.
 
 Row update (Catto's sequential impulses, Moreau–Jean): with u_n the row's normal
 relative velocity (separating > 0), lambda = max(lambda + omega m_eff (target - u_n),
@@ -91,29 +92,62 @@ class GaussSeidel:
                 self.warm_friction(s)
         elif ti.static(mode == POSITION):
             out = self.update_row(s, self.w, self.mu, self.pos_target, omega)
-        else:
-            if ti.static(self.f.friction):
-                out = self.solve_friction(s)     # friction first, normal last
+        elif ti.static(self.f.friction):
+            out = self.solve_friction(s)     # friction first, normal last
             out = ti.max(out, self.update_row(s, self.state.v, self.lam, self.target, omega))
+        else:
+            out = self.update_row(s, self.state.v, self.lam, self.target, omega)
         return out
 
     @ti.func
     def update_row(self, s, field: ti.template(), acc: ti.template(), goal: ti.template(), omega):
         """Row s on velocities ``field`` with accumulated impulse ``acc`` and targets
-        ``goal``: lambda = max(lambda + omega m_eff (goal - u_n), 0), applying the
-        change; returns |change| / m_eff [m/s]."""
-        a = self.row_a[s]
-        b = self.row_b[s]
-        n = self.normal[s]
+        ``goal`` (update_from on the row fields)."""
+        return self.update_from(s, self.row_a, self.row_b, self.normal, self.meff, field,
+                                acc, goal, omega)
+
+    @ti.func
+    def update_from(self, s, row_a: ti.template(), row_b: ti.template(),
+                    normal: ti.template(), meff: ti.template(), field: ti.template(),
+                    acc: ti.template(), goal: ti.template(), omega):
+        """Row s of the rows (row_a, row_b, normal, meff, acc, goal) on velocities
+        ``field``: lambda = max(lambda + omega m_eff (goal - u_n), 0), applying the change;
+        returns |change| / m_eff [m/s], halved where halved_residual (full_residual)."""
+        a = row_a[s]
+        b = row_b[s]
+        n = normal[s]
         rel = field[a]
         if b >= 0:
             rel = rel - field[b]
-        meff = self.meff[s]
+        m = meff[s]
         old = acc[s]
-        new = ti.max(old + omega * meff * (goal[s] - rel.dot(n)), 0)
+        new = ti.max(old + omega * m * (goal[s] - rel.dot(n)), 0)
         acc[s] = new
-        self.push(field, a, b, n, new - old)
-        return self.speed_change(ti.abs(new - old), b, meff)
+        out = ti.cast(0, self.real)
+        if ti.static(self.halved_residual):
+            out = self.push_halved(field, a, b, n, new - old)
+        else:
+            self.push(field, a, b, n, new - old)
+            out = self.speed_change(ti.abs(new - old), b, m)
+        return out
+
+    @ti.func
+    def push_halved(self, field: ti.template(), a, b, n, impulse):
+        """push with equal masses, whose product impulse / m [m/s] also gives the row's
+        residual: |impulse| / m_eff is 2 |impulse / m| for a pair and |impulse / m| for
+        a wall row (speed_change), returned halved: |impulse / m| and |impulse / m| / 2.
+        Halving and doubling are exact, so full_residual's doubled largest value is
+        speed_change's largest (below 2^-1021 m/s, far under any tolerance, the last
+        bit may differ) for two operations fewer per row update."""
+        change = impulse * self.state.inv_m0[None]
+        step = change * n
+        field[a] = field[a] + step
+        out = ti.abs(change)
+        if b >= 0:
+            field[b] = field[b] - step
+        else:
+            out = out * 0.5
+        return out
 
     @ti.func
     def speed_change(self, impulse, b, meff):
@@ -159,7 +193,7 @@ class GaussSeidel:
             for c in range(k):
                 if lo[c] + j < hi[c]:
                     worst = ti.max(worst, self.solve_row(lo[c] + j, mode, omega))
-        ti.atomic_max(self.residual[None], worst)
+        ti.atomic_max(self.residual[None], self.full_residual(worst, mode))
 
     @ti.func
     def sweep_colour(self, colour, mode: ti.template(), omega, batched: ti.template() = False):
@@ -220,12 +254,28 @@ class GaussSeidel:
     @ti.func
     def sweep_scheduled(self, colour, mode: ti.template(), omega):
         """One serial pass over colour ``colour``'s rows in schedule order
-        (schedule_rows; call where everything runs serially); the largest change goes
-        to ``residual``."""
+        (schedule_rows; call where everything runs serially), velocity and position
+        updates from the packed rows where the solver keeps them (contacts/packed.py);
+        the largest change goes to ``residual``."""
         worst = ti.cast(0, self.real)
         for t in range(self.schedule_start[colour], self.schedule_start[colour + 1]):
-            worst = ti.max(worst, self.solve_row(self.schedule[t], mode, omega))
-        self.residual[None] = ti.max(self.residual[None], worst)
+            if ti.static(self.packed and mode == POSITION):
+                worst = ti.max(worst, self.update_packed(t, self.w, omega))
+            elif ti.static(self.packed and mode == VELOCITY):
+                worst = ti.max(worst, self.update_packed(t, self.state.v, omega))
+            else:
+                worst = ti.max(worst, self.solve_row(self.schedule[t], mode, omega))
+        self.residual[None] = ti.max(self.residual[None], self.full_residual(worst, mode))
+
+    @ti.func
+    def full_residual(self, worst, mode: ti.template()):
+        """The largest change [m/s] of a sweep whose row updates returned at most
+        ``worst``: twice that where they return it halved (halved_residual: push_halved;
+        WARM returns 0)."""
+        out = worst
+        if ti.static(self.halved_residual and mode != WARM):
+            out = worst * 2
+        return out
 
     @ti.func
     def colour_of(self, k):

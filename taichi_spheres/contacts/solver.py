@@ -62,6 +62,7 @@ from ..params import StepParams
 from ..state import Features, SphereState
 from .friction_rows import FrictionRows
 from .overlaps import OverlapMeasure
+from .packed import PackedRows, packs_rows
 from .pgs import POSITION, VELOCITY, WARM, GaussSeidel, next_sweep, plain_sweep
 from .rows import ContactRows
 from .shock import ShockPropagation, shock_compiled
@@ -79,7 +80,7 @@ SOLVE_STAGES = ("gather", "list_cells", "prepare", "warm_start", "velocity_sweep
 
 
 @ti.data_oriented
-class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
+class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPropagation,
                     WarmStartEnergy, PositionEnergy, OverlapMeasure, WarmTable):
     """Contact rows and their projected Gauss–Seidel solve (module docstring).
 
@@ -116,6 +117,8 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             (MAX_COLOURS,) i32 its counts
         schedule: (K,) i32, schedule_start: (MAX_COLOURS + 1,) i32, only on the CPU —
             the rows in the serial sweeps' order, colour by colour (pgs.schedule_rows)
+        pack_a, pack_b, pack_n, pack_meff, pack_goal, pack_acc: (K,), only where
+            packs_rows — the rows in that order, for the serial sweeps (packed.py)
         scan_bufs: cell_start and the block sums of its scan (grid.scan_buffers)
         staged: (K,) vec3 i32, only on serial engines — the rows in the order the
             gathering found them: owner cell, a, b (rows.py gather); n_staged their count
@@ -140,6 +143,10 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             bound == "on" or (bound == "auto" and not features.friction))
         # position_energy.py: the position pass lifts no more than the step dissipated
         self.bounded_position_pass = self.rules.bounded_position_pass and features.gravity
+        # equal masses without friction: the row updates return their residuals halved,
+        # two operations fewer each (pgs.push_halved, full_residual)
+        self.halved_residual = features.equal_masses and not features.friction
+        self.packed = packs_rows(features, state.capacity, cpu)
         self._allocate(state.capacity, grid.cell_capacity)
         self.load_sweep_rules(self.rules)      # (each bind loads its Simulation's)
         self._build_kernels()
@@ -182,6 +189,7 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
         serial_solve = self.serial or self.cpu
         self.schedule = ti.field(ti.i32, shape=k) if serial_solve else None
         self.schedule_start = ti.field(ti.i32, shape=MAX_COLOURS + 1) if serial_solve else None
+        self.allocate_packed(k)
         self.colour_active = ti.field(ti.i32, shape=MAX_COLOURS + 1)
         self.colour_fill = ti.field(ti.i32, shape=MAX_COLOURS)
         self.scan_bufs = self.grid.scan_buffers(self.cell_start)
@@ -489,14 +497,17 @@ class ContactSolver(ContactRows, GaussSeidel, FrictionRows, ShockPropagation,
             if ti.static(self.bounded_warm_start):
                 self.bound_warm_start()
         elif ti.static(stage == 4):
+            self.pack_rows(self.target, self.lam)
             self.params.contact_iterations[None] = self.iterate_serially(
                 VELOCITY, self.cap_v, self.plain_v, self.tol_v)
             self.params.contact_residual[None] = self.residual[None]
+            self.unpack_impulses(self.lam)
         elif ti.static(stage == 5):
             if ti.static(self.shock):
                 self.shock_pass()
             self.position_targets()
         elif ti.static(stage == 6):
+            self.pack_rows(self.pos_target, self.mu)
             self.params.position_iterations[None] = self.position_pass_serially()
         else:
             self.finish()
