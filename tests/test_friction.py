@@ -234,24 +234,33 @@ def test_frictional_pile_energy_is_booked_and_settles(arch, mu_r):
         assert np.abs(st.omega * st.radius[:, None]).max() < 1e-6
 
 
-@pytest.mark.own_runtime
-def test_friction_same_bits_for_any_thread_count(arch):
-    """The frictional solve gives the same bits on 1 and 2 threads, and with one cell
-    per sweep loop iteration or several interleaved (Performance.frictional_interleave)
-    (CPU properties)."""
+def test_frictional_solve_same_bits_on_both_paths_and_interleavings(arch):
+    """The frictional solve gives the same bits on the serial path (every loop on one
+    thread) and on the parallel one (forced with the HOST_ONLY sphere counts at 0: one
+    launch per colour, its cells spread over the runtime's threads, Taichi's default
+    count), and with one cell per sweep loop iteration or several interleaved
+    (Performance.frictional_interleave, parallel_interleave). Thread counts proper:
+    tests/test_gas.py (CPU properties)."""
     if arch != "cpu":
-        pytest.skip("thread counts are a CPU setting")
-    digests = []
-    # (2 threads first: a runtime with Taichi's default count on 2 cores is kept; then
-    # the two interleavings on one runtime: one engine, a solve kernel each)
-    for threads, interleave in ((2, 8), (1, 8), (1, 1)):
-        sim = ts.Simulation(_pile(), arch=arch, precision="f64", threads=threads,
-                            tuning=Tuning().with_(frictional_interleave=interleave))
+        pytest.skip("the serial path and the interleavings are CPU settings")
+    parallel = dict(serial_light_below=0, serial_heavy_below=0, serial_solver_below=0,
+                    few_pairs=0, serial_resolve_pairs=0)
+    digests, solvers = [], {}
+    for interleave, path in ((8, "serial"), (1, "serial"), (1, "parallel"), (4, "parallel")):
+        forced = parallel if path == "parallel" else {}
+        tuning = Tuning().with_(frictional_interleave=interleave,
+                                parallel_interleave=interleave, **forced)
+        sim = ts.Simulation(_pile(), arch=arch, precision="f64", tuning=tuning)
         sim.advance(0.3)
         st = sim.state()
         digests.append((observe.state_digest(st, "f64"), st.omega.tobytes()))
-    assert digests[0] == digests[1] == digests[2]
-    assert {key[0] for key in sim.debug_view().solver._serial_solves} == {8, 1}
+        solvers.setdefault(path, set()).add(sim.debug_view().solver)
+    assert all(d == digests[0] for d in digests[1:])
+    # each path's runs share its engine (the serial one has its own: Schedule's flags),
+    # with a serial solve kernel or a sweep kernel per interleaving
+    (serial,), (spread,) = solvers["serial"], solvers["parallel"]
+    assert {key[0] for key in serial._serial_solves} == {8, 1}
+    assert {key[3] for key in spread._sweeps} >= {1, 4}
 
 
 def _silo(hole, mu=0.5, recycle=False, n_side=5):

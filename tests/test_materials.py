@@ -10,6 +10,7 @@ import pytest
 
 import taichi_spheres as ts
 from taichi_spheres.builders import gas
+from taichi_spheres.config import Tuning
 from taichi_spheres.reference import EventDrivenReference, walton_impact
 from taichi_spheres.state import Features
 
@@ -181,14 +182,17 @@ def test_two_material_pile_settles_with_its_energy_booked(arch):
     assert sim.last_step["max_overlap"] < 1e-5
 
 
-@pytest.mark.own_runtime
-def test_two_material_pile_same_bits_for_any_thread_count(arch):
+def test_two_material_pile_same_bits_on_both_paths(arch):
+    """Two materials give the same bits on the serial path (every loop on one thread)
+    and on the parallel one (forced with the HOST_ONLY sphere counts at 0: its loops
+    spread over the runtime's threads) (CPU properties)."""
     if arch != "cpu":
-        pytest.skip("thread counts are a CPU setting")
+        pytest.skip("the serial path is a CPU setting")
+    parallel = Tuning().with_(serial_light_below=0, serial_heavy_below=0,
+                              serial_solver_below=0, few_pairs=0, serial_resolve_pairs=0)
     digests = []
-    # (2 first: a runtime with Taichi's default count on 2 cores is kept)
-    for threads in (2, 1):
-        sim = ts.Simulation(_two_material_pile(), arch=arch, precision="f64", threads=threads)
+    for tuning in (Tuning(), parallel):
+        sim = ts.Simulation(_two_material_pile(), arch=arch, precision="f64", tuning=tuning)
         sim.advance(0.2)
         digests.append((sim.state().x.tobytes(), sim.state().omega.tobytes()))
     assert digests[0] == digests[1]
