@@ -22,6 +22,8 @@ stage is a kernel of its own, ``solve_<stage>``: contacts/solver.py SOLVE_STAGES
 flight.
 
     python tools/kernel_profile.py --scene scenes/pour.toml --at 1.0 --window 0.2
+    python tools/kernel_profile.py --scene scenes/pour.toml --at 1.5 --window 0.2 --stages \
+        --step-fraction 0.2 --tuning position_iterations=100
     python tools/kernel_profile.py --silo --write
     python tools/kernel_profile.py --silo --stages --write   # the serial solve's stages
     python tools/kernel_profile.py --silo --tuning step_scaled_sweeps=False contact_iterations=60
@@ -46,7 +48,8 @@ from taichi.profiler.kernel_profiler import get_default_kernel_profiler  # noqa:
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import DEFAULT  # noqa: E402
 from taichi_spheres import runtime  # noqa: E402
-from machine import hardware, publish, untimed_pass  # noqa: E402
+from machine import (hardware, publish, step_fraction_arg, tuning_args,  # noqa: E402
+                     untimed_pass)
 
 
 def silo_simulation(tuning=()):
@@ -148,17 +151,26 @@ def main(argv=None):
     ap.add_argument("--host", action="store_true",
                     help="also profile the Python side of the window (cProfile, top 15)")
     ap.add_argument("--tuning", nargs="+", default=[], metavar="NAME=VALUE",
-                    help="with --silo: Tuning.with_ keywords of its run (tools/silo.py's)")
+                    help="with --silo: Tuning.with_ keywords of its run (tools/silo.py's); "
+                         "with --scene: over the scene file's [tuning]")
+    ap.add_argument("--step-fraction", type=float, default=None,
+                    help="with --scene: the Simulation's step_fraction (else the scene "
+                         "file's, else the default)")
     ap.add_argument("--stages", action="store_true",
                     help="launch the serial contact solve one kernel per stage "
                          "(Performance.staged_solve, the same bits): the table then "
                          "shows each stage (gather, sweeps, ...) as a kernel of its own")
     ap.add_argument("--write", action="store_true")
     args = ap.parse_args(argv)
-    if args.tuning and not args.silo:
-        ap.error("--tuning goes with --silo")
-    if args.tuning and args.write:
-        ap.error("--write keeps the defaults' profile: run --tuning without it")
+    if args.tuning and not (args.silo or args.scene):
+        ap.error("--tuning goes with --silo or --scene")
+    if args.step_fraction is not None and not args.scene:
+        ap.error("--step-fraction goes with --scene")
+    if (args.tuning or args.step_fraction is not None) and args.write:
+        ap.error("--write keeps the defaults' profile: run --tuning and --step-fraction "
+                 "without it")
+    args.scene_tuning = tuning_args(args.tuning, ap) if args.scene else {}
+    args.scene_steps = step_fraction_arg(args.step_fraction, ap) if args.scene else {}
     if [args.scene is not None, args.silo, args.gas != 0, args.silo_large != 0].count(True) != 1:
         ap.error("give one of --scene TOML, --gas N, --silo or --silo-large N")
     if args.gas < 0 or args.silo_large < 0:
@@ -202,10 +214,12 @@ def simulation(args, threads) -> tuple:
                             precision=args.precision, threads=threads)
         return sim, f"Gas of {args.gas} spheres (tools/bench.py's)", f"profile-gas-{args.arch}"
     scene = ts.load_scene(args.scene)
-    tuning = DEFAULT.with_(**scene.meta.get("tuning", {}), staged_solve=True) if args.stages \
-        else None                  # (None: the scene file's [tuning], as Simulation reads it)
+    changes = dict(scene.meta.get("tuning", {}), **args.scene_tuning)
+    if args.stages:
+        changes["staged_solve"] = True
+    tuning = DEFAULT.with_(**changes) if changes else None   # (None: as Simulation reads it)
     sim = ts.Simulation(scene, arch=args.arch, precision=args.precision, threads=threads,
-                        tuning=tuning)
+                        tuning=tuning, **args.scene_steps)
     sim.advance_to(args.at)
     name = os.path.splitext(os.path.basename(args.scene))[0]
     section = f"profile-{name}" + ("" if args.arch == "cpu" else f"-{args.arch}")
