@@ -47,7 +47,7 @@ def gas(n, packing=0.3, radius=0.5, periodic=True, gravity=(0.0, 0.0, 0.0), rest
                              wall_restitution=wall_restitution, name=f"gas{n}")
 
 
-def same_bits_scene(n=400, frictional=False, materials=False):
+def same_bits_scene(n=400, frictional=False, materials=False, equal=False):
     """The reference scene of the same-bits promise (tests/test_same_bits.py,
     tools/state_digest.py): n spheres of radii 0.035-0.05 m and masses 0.5-2 kg on a
     jittered cubic lattice of spacing 0.125 m filling a cubic box (1 m for n <= 512),
@@ -61,7 +61,9 @@ def same_bits_scene(n=400, frictional=False, materials=False):
     (a cylinder of radius 0.01 m, spheres outside) at the box's centre: the spin,
     Walton impacts, friction rows and geometry code paths. materials (with frictional):
     every other sphere of a second material (restitution 0.6, friction 0.2, no rolling
-    friction): the per-pair table lookups."""
+    friction): the per-pair table lookups. equal (without frictional): every sphere of
+    radius 0.045 m and mass 1 kg, the equal-mass code paths of the contact solver
+    (contacts/pgs.py push_halved) and its packed rows (contacts/packed.py)."""
     rng = np.random.default_rng(2024)
     side = 1
     while side ** 3 < n:
@@ -73,6 +75,8 @@ def same_bits_scene(n=400, frictional=False, materials=False):
     x = (idx + 0.5) * spacing + jitter
     v = 4.0 * rng.random((n, 3)) - 2.0
     mass = 0.5 + 1.5 * rng.random(n)
+    if equal:
+        radius, mass = np.full(n, 0.045), np.full(n, 1.0)
     extra = {}
     if frictional:
         centre = 0.5 * side * spacing

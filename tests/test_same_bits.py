@@ -7,7 +7,7 @@ in ``tests/same_bits.json`` were computed by ``python tools/state_digest.py --wr
 every CPU (any x86-64 model, with or without AVX-512 and FMA; ARM), both compile
 modes, the fused step and the per-colour parallel launches must reproduce them (the
 "plain" case: the small one with plain sweeps at 100 / 100, the full caps in every
-step and no substeps). A
+step and no substeps; the "equal" case: the small one with equal radii and masses). A
 change of the physics changes them on purpose: store the new ones with that command
 and say why in the commit.
 
@@ -35,7 +35,7 @@ def _digest(case, precision, arch="cpu", **kw):
     """(digest, Simulation) of the reference scene of ``case`` after its run."""
     stored = STORED[case]
     scene = same_bits_scene(stored["n"], stored.get("frictional", False),
-                            stored.get("materials", False))
+                            stored.get("materials", False), stored.get("equal", False))
     kw["tuning"] = kw.get("tuning", DEFAULT).with_(**stored.get("tuning", {}))
     sim = ts.Simulation(scene, arch=arch, precision=precision, **kw)
     sim.advance(STORED[case]["duration"])
@@ -48,11 +48,15 @@ def _cpu_only(arch):
                     "their runs with each other)")
 
 
-@pytest.mark.parametrize("case", ["small", "large", "frictional", "materials", "plain"])
+@pytest.mark.parametrize("case", ["small", "large", "frictional", "materials", "plain",
+                                  "equal"])
 def test_reference_scenes_give_the_stored_digests(arch, precision, case):
     _cpu_only(arch)
     digest, sim = _digest(case, precision)
     assert sim.stats["pair_collisions"] > 1000 and sim.stats["wall_collisions"] > 100
+    if case == "equal":     # the equal-mass row updates and packed rows ran
+        solver = sim.debug_view().solver
+        assert sim.stats["contacts"] > 0 and solver.halved_residual and solver.packed
     assert digest == STORED[case]["digests"][precision]
 
 

@@ -9,7 +9,9 @@ the floor; "large": 3,000 spheres, where detection keeps near lists and sweeps c
 launch per colour; "frictional": the small case with friction, spin and a post of
 static geometry; "materials": the frictional case with every other sphere of a
 second material; "plain": the small case with plain Gauss-Seidel sweeps at 100 / 100,
-the full caps in every step and no substeps, the contact solver's former defaults)
+the full caps in every step and no substeps, the contact solver's former defaults;
+"equal": the small case with equal radii and masses, the contact solver's equal-mass
+row updates and packed rows)
 and prints the digest of the final positions and velocities (``observe.state_digest``)
 with the collision counts, for each path asked for, and whether it matches the digest
 stored there (``tests/test_same_bits.py`` holds the engine to it).
@@ -33,7 +35,7 @@ import sys
 ROOT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..")
 STORED = os.path.join(ROOT, "tests", "same_bits.json")
 PATHS = ("default", "fused", "parallel")
-CASES = ["small", "large", "frictional", "materials", "plain"]
+CASES = ["small", "large", "frictional", "materials", "plain", "equal"]
 
 
 def load_stored() -> dict:
@@ -56,7 +58,7 @@ def run_path(case: dict, precision: str, path: str, threads=None, compile=None) 
         else DEFAULT
     tuning = tuning.with_(**case.get("tuning", {}))
     sim = ts.Simulation(same_bits_scene(case["n"], case.get("frictional", False),
-                                        case.get("materials", False)),
+                                        case.get("materials", False), case.get("equal", False)),
                         precision=precision, threads=threads,
                         fused=path == "fused", tuning=tuning)
     sim.advance(case["duration"])

@@ -7,14 +7,14 @@ accumulated impulses are copied into fields of their own in the list's order, so
 that every sweep of the pass reads them one after the other, without the list and
 its index arithmetic; after the velocity pass the accumulated impulses go back to
 their rows (the finish keeps them for the warm start; nothing reads the position
-pass's after it). The same updates in the same order: the same bits. The pour's bed
-steps take about a tenth less time with packed rows and the halved residuals of
-pgs.update_from (docs/bench.md, "Packed rows").
+pass's after it). The same updates in the same order: the same bits (docs/bench.md,
+"Packed rows and halved residuals", measures what they save).
 
 Frictional rows are swept from their own fields (friction_rows.py), and an engine
-with room for more spheres than the default Performance.serial_solver_below sweeps
-in parallel: neither keeps packed rows (packs_rows). A Simulation that asks such an
-engine for a serial solve gets the same sweeps through the list.
+with more room than a scene below the default Performance.serial_solver_below gets
+(engine.capacity_for) sweeps larger scenes in parallel: neither keeps packed rows
+(packs_rows). A Simulation that asks such an engine for a serial solve gets the same
+sweeps through the list.
 
 A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 """
@@ -29,10 +29,12 @@ __all__ = ["PackedRows", "packs_rows", "packed_row_bytes"]
 
 def packs_rows(features: Features, spheres: int, cpu: bool) -> bool:
     """Whether the contact solver of an engine with room for ``spheres`` keeps packed
-    rows (module docstring): on the CPU, with contacts and without friction, up to
-    the default Performance.serial_solver_below spheres."""
-    return (cpu and features.contacts and not features.friction
-            and spheres <= Performance().serial_solver_below)
+    rows (module docstring): on the CPU, with contacts and without friction, where
+    the room is at most what a new engine makes for a scene just below the default
+    Performance.serial_solver_below (the scenes that solve serially by default)."""
+    from ..engine import MIN_SPHERES, capacity_for   # (engine imports the solver)
+    largest = capacity_for(Performance().serial_solver_below - 1, MIN_SPHERES)
+    return cpu and features.contacts and not features.friction and spheres <= largest
 
 
 def packed_row_bytes(real: int) -> int:
@@ -49,15 +51,15 @@ class PackedRows:
     pass's target and accumulated impulse of the row at schedule[t], at t."""
 
     def allocate_packed(self, rows: int):
-        """The packed fields for ``rows`` rows, where self.packed (packs_rows)."""
-        if self.packed:
-            real = self.real
-            self.pack_a = ti.field(ti.i32, shape=rows)
-            self.pack_b = ti.field(ti.i32, shape=rows)
-            self.pack_n = ti.Vector.field(3, real, shape=rows)
-            self.pack_meff = ti.field(real, shape=rows)
-            self.pack_goal = ti.field(real, shape=rows)
-            self.pack_acc = ti.field(real, shape=rows)
+        """The packed fields for ``rows`` rows where self.packed (packs_rows), else
+        None."""
+        real, on = self.real, self.packed
+        self.pack_a = ti.field(ti.i32, shape=rows) if on else None
+        self.pack_b = ti.field(ti.i32, shape=rows) if on else None
+        self.pack_n = ti.Vector.field(3, real, shape=rows) if on else None
+        self.pack_meff = ti.field(real, shape=rows) if on else None
+        self.pack_goal = ti.field(real, shape=rows) if on else None
+        self.pack_acc = ti.field(real, shape=rows) if on else None
 
     @ti.func
     def pack_rows(self, goal: ti.template(), acc: ti.template()):
@@ -85,7 +87,8 @@ class PackedRows:
 
     @ti.func
     def update_packed(self, t, field: ti.template(), omega):
-        """pgs.update_from on the packed row t, on velocities or pseudo-velocities
-        ``field``."""
+        """pgs.update_from on the packed row t (the schedule's t-th) with relaxation
+        ``omega``, on velocities or pseudo-velocities ``field`` ((N,) vec3 [m/s]);
+        returns its residual [m/s] (halved where halved_residual)."""
         return self.update_from(t, self.pack_a, self.pack_b, self.pack_n, self.pack_meff,
                                 field, self.pack_acc, self.pack_goal, omega)

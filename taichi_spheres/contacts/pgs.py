@@ -137,8 +137,9 @@ class GaussSeidel:
         residual: |impulse| / m_eff is 2 |impulse / m| for a pair and |impulse / m| for
         a wall row (speed_change), returned halved: |impulse / m| and |impulse / m| / 2.
         Halving and doubling are exact, so full_residual's doubled largest value is
-        speed_change's largest (below 2^-1021 m/s, far under any tolerance, the last
-        bit may differ) for two operations fewer per row update."""
+        speed_change's largest (where |impulse / m| is below 2^-1021 m/s in f64,
+        2^-125 in f32, far under any tolerance, the last bit may differ); a pair row
+        saves speed_change's sum and product."""
         change = impulse * self.state.inv_m0[None]
         step = change * n
         field[a] = field[a] + step
