@@ -239,8 +239,8 @@ def test_frictional_solve_same_bits_on_both_paths_and_interleavings(arch):
     thread) and on the parallel one (forced with the HOST_ONLY sphere counts at 0: one
     launch per colour, its cells spread over the runtime's threads, Taichi's default
     count), and with one cell per sweep loop iteration or several interleaved
-    (Performance.frictional_interleave, parallel_interleave). Thread counts proper:
-    tests/test_gas.py (CPU properties)."""
+    (Performance.frictional_interleave, parallel_interleave): the parallel sweeps'
+    bits do not depend on how their cells are spread over threads (CPU properties)."""
     if arch != "cpu":
         pytest.skip("the serial path and the interleavings are CPU settings")
     parallel = dict(serial_light_below=0, serial_heavy_below=0, serial_solver_below=0,
@@ -257,9 +257,10 @@ def test_frictional_solve_same_bits_on_both_paths_and_interleavings(arch):
         solvers.setdefault(path, set()).add(sim.debug_view().solver)
     assert all(d == digests[0] for d in digests[1:])
     # each path's runs share its engine (the serial one has its own: Schedule's flags),
-    # with a serial solve kernel or a sweep kernel per interleaving
+    # with a serial solve kernel or a sweep kernel per interleaving (the engines may
+    # hold earlier tests' kernels too)
     (serial,), (spread,) = solvers["serial"], solvers["parallel"]
-    assert {key[0] for key in serial._serial_solves} == {8, 1}
+    assert {key[0] for key in serial._serial_solves} >= {8, 1}
     assert {key[3] for key in spread._sweeps} >= {1, 4}
 
 

@@ -194,8 +194,10 @@ def test_two_material_pile_same_bits_on_both_paths(arch):
     for tuning in (Tuning(), parallel):
         sim = ts.Simulation(_two_material_pile(), arch=arch, precision="f64", tuning=tuning)
         sim.advance(0.2)
-        digests.append((sim.state().x.tobytes(), sim.state().omega.tobytes()))
+        st = sim.state()
+        digests.append((st.x.tobytes(), st.v.tobytes(), st.omega.tobytes()))
     assert digests[0] == digests[1]
+    assert sim.debug_view().solver._sweeps, "the parallel sweeps did not run"
 
 
 def test_discharged_spheres_take_their_material_with_them(arch):

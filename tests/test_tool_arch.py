@@ -78,6 +78,12 @@ def test_contact_solver_options_that_do_not_go_together(capsys, argv, words):
     (["--silo-large", "1000", "--silo"], "give one of"),
     (["--silo-large", "1000", "--precision", "f32"], "--silo-large runs in f64"),
     (["--silo-large", "1000", "--arch", "vulkan"], "on cpu or cuda"),
+    (["--gas", "100", "--step-fraction", "0.2"], "--step-fraction goes with --scene"),
+    (["--gas", "100", "--tuning", "relaxation=1.0"], "--tuning goes with --silo or --scene"),
+    (["--scene", "scenes/pour.toml", "--step-fraction", "2"], "step_fraction must be"),
+    (["--scene", "scenes/pour.toml", "--tuning", "relaxation"], "write NAME=VALUE"),
+    (["--scene", "scenes/pour.toml", "--step-fraction", "0.2", "--write"],
+     "--write keeps the defaults' profile"),
 ])
 def test_kernel_profile_options_that_do_not_go_together(capsys, argv, words):
     with pytest.raises(SystemExit):
