@@ -11,10 +11,10 @@ pass's after it). The same updates in the same order: the same bits (docs/bench.
 "Packed rows and halved residuals", measures what they save).
 
 Frictional rows are swept from their own fields (friction_rows.py), and an engine
-with more room than a scene below the default Performance.serial_solver_below gets
-(engine.capacity_for) sweeps larger scenes in parallel: neither keeps packed rows
-(packs_rows). A Simulation that asks such an engine for a serial solve gets the same
-sweeps through the list.
+with more room than engine.capacity_for makes for a scene just below the default
+Performance.serial_solver_below is made for scenes that sweep in parallel: neither
+keeps packed rows (packs_rows). A Simulation that asks such an engine for a serial
+solve gets the same sweeps through the list.
 
 A mixin of :class:`taichi_spheres.contacts.solver.ContactSolver` (its fields).
 """

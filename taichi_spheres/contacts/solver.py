@@ -144,7 +144,7 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         # position_energy.py: the position pass lifts no more than the step dissipated
         self.bounded_position_pass = self.rules.bounded_position_pass and features.gravity
         # equal masses without friction: the row updates return their residuals halved,
-        # two operations fewer each (pgs.push_halved, full_residual)
+        # two operations fewer per pair row (pgs.push_halved, full_residual)
         self.halved_residual = features.equal_masses and not features.friction
         self.packed = packs_rows(features, state.capacity, cpu)
         self._allocate(state.capacity, grid.cell_capacity)
