@@ -62,17 +62,21 @@ class PackedRows:
         self.pack_acc = ti.field(real, shape=rows) if on else None
 
     @ti.func
-    def pack_rows(self, goal: ti.template(), acc: ti.template()):
-        """Copy every scheduled row, with target ``goal`` and accumulated impulse ``acc``,
-        to its place in the schedule (kernel top level, one serial task)."""
+    def pack_rows(self, goal: ti.template(), acc: ti.template(), spheres: ti.template()):
+        """Copy every scheduled row's normal, target ``goal`` and accumulated impulse
+        ``acc`` to its place in the schedule, with ``spheres`` its spheres and effective
+        mass too (the velocity pass; the position pass finds them there: the rows'
+        spheres and masses do not change in a step, their normals do) (kernel top
+        level, one serial task)."""
         if ti.static(self.packed):
             ti.loop_config(serialize=True)
             for t in range(self.schedule_start[self.n_colours_f[None]]):
                 s = self.schedule[t]
-                self.pack_a[t] = self.row_a[s]
-                self.pack_b[t] = self.row_b[s]
+                if ti.static(spheres):
+                    self.pack_a[t] = self.row_a[s]
+                    self.pack_b[t] = self.row_b[s]
+                    self.pack_meff[t] = self.meff[s]
                 self.pack_n[t] = self.normal[s]
-                self.pack_meff[t] = self.meff[s]
                 self.pack_goal[t] = goal[s]
                 self.pack_acc[t] = acc[s]
 

@@ -497,7 +497,7 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
             if ti.static(self.bounded_warm_start):
                 self.bound_warm_start()
         elif ti.static(stage == 4):
-            self.pack_rows(self.target, self.lam)
+            self.pack_rows(self.target, self.lam, True)
             self.params.contact_iterations[None] = self.iterate_serially(
                 VELOCITY, self.cap_v, self.plain_v, self.tol_v)
             self.params.contact_residual[None] = self.residual[None]
@@ -507,7 +507,7 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
                 self.shock_pass()
             self.position_targets()
         elif ti.static(stage == 6):
-            self.pack_rows(self.pos_target, self.mu)
+            self.pack_rows(self.pos_target, self.mu, False)
             self.params.position_iterations[None] = self.position_pass_serially()
         else:
             self.finish()
