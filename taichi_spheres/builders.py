@@ -9,7 +9,7 @@ from .geometry import Cylinder
 from .materials import Material
 from .scene import Scene
 
-__all__ = ["gas", "same_bits_scene", "fcc_block", "ball_on_block"]
+__all__ = ["gas", "same_bits_scene", "same_bits_case_scene", "fcc_block", "ball_on_block"]
 
 
 def gas(n, packing=0.3, radius=0.5, periodic=True, gravity=(0.0, 0.0, 0.0), restitution=1.0,
@@ -90,6 +90,13 @@ def same_bits_scene(n=400, frictional=False, materials=False, equal=False):
     return Scene.from_arrays(x, v, radius, mass=mass, box=((0.0,) * 3, (side * spacing,) * 3),
                              periodic=(True, True, False), gravity=(0.0, 0.0, -9.81),
                              restitution=0.8, wall_restitution=0.9, name="same_bits", **extra)
+
+
+def same_bits_case_scene(case: dict) -> Scene:
+    """same_bits_scene of a case of tests/same_bits.json: its n and the flags it sets
+    (frictional, materials, equal; absent: False)."""
+    return same_bits_scene(case["n"], case.get("frictional", False),
+                           case.get("materials", False), case.get("equal", False))
 
 
 def fcc_block(cells=(5, 5, 10), radius=0.01, spacing=1.0 + 1e-6, restitution=0.5,

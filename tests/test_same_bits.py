@@ -24,7 +24,7 @@ import pytest
 
 import taichi_spheres as ts
 from taichi_spheres import runtime
-from taichi_spheres.builders import same_bits_scene
+from taichi_spheres.builders import same_bits_case_scene, same_bits_scene
 from taichi_spheres.config import DEFAULT
 
 with open(os.path.join(os.path.dirname(__file__), "same_bits.json")) as _f:
@@ -34,8 +34,7 @@ with open(os.path.join(os.path.dirname(__file__), "same_bits.json")) as _f:
 def _digest(case, precision, arch="cpu", **kw):
     """(digest, Simulation) of the reference scene of ``case`` after its run."""
     stored = STORED[case]
-    scene = same_bits_scene(stored["n"], stored.get("frictional", False),
-                            stored.get("materials", False), stored.get("equal", False))
+    scene = same_bits_case_scene(stored)
     kw["tuning"] = kw.get("tuning", DEFAULT).with_(**stored.get("tuning", {}))
     sim = ts.Simulation(scene, arch=arch, precision=precision, **kw)
     sim.advance(STORED[case]["duration"])

@@ -51,14 +51,13 @@ def run_path(case: dict, precision: str, path: str, threads=None, compile=None) 
     sys.path.insert(0, ROOT)
     import taichi_spheres as ts
     from taichi_spheres import runtime
-    from taichi_spheres.builders import same_bits_scene
+    from taichi_spheres.builders import same_bits_case_scene
     from taichi_spheres.config import DEFAULT
     runtime.ensure("cpu", precision, threads=threads, compile=compile)
     tuning = DEFAULT.with_(few_pairs=-1, serial_resolve_pairs=-1) if path == "parallel" \
         else DEFAULT
     tuning = tuning.with_(**case.get("tuning", {}))
-    sim = ts.Simulation(same_bits_scene(case["n"], case.get("frictional", False),
-                                        case.get("materials", False), case.get("equal", False)),
+    sim = ts.Simulation(same_bits_case_scene(case),
                         precision=precision, threads=threads,
                         fused=path == "fused", tuning=tuning)
     sim.advance(case["duration"])
