@@ -2,13 +2,18 @@
 the tests build (taichi_spheres/engine.py), written by each pytest(-xdist) worker to
 ``$ENGINE_CENSUS_DIR/<worker>.jsonl``: the test that built it, the Taichi runtime's
 generation, the engine's kind (its key without the generation, the precision by name)
-and its room for spheres and cells. Loaded with ``-p engine_census_plugin`` (tools/ on
-PYTHONPATH); without ENGINE_CENSUS_DIR it does nothing."""
+and its room for spheres and cells; and ``<worker>.kernels.json``: per Taichi kernel
+name, the seconds its compiles took (the Python AST pass, and the first launch of each
+compiled instance: LLVM's compile and one run) and how many instances compiled. Loaded
+with ``-p engine_census_plugin`` (tools/ on PYTHONPATH); without ENGINE_CENSUS_DIR it
+does nothing."""
 from __future__ import annotations
 
+import collections
 import dataclasses
 import json
 import os
+import time
 
 CENSUS_ENV = "ENGINE_CENSUS_DIR"
 
@@ -36,3 +41,51 @@ def pytest_configure(config):
                                       cells=cell_capacity)) + "\n")
 
     engine.Engine.__init__ = logged
+
+
+def log_kernel_compiles() -> dict:
+    """Wrap Taichi's Kernel.materialize (the AST pass of a new instance) and
+    Kernel.launch_kernel (the first launch of an instance compiles it) to sum their
+    seconds per kernel name: {name: [AST seconds, first-launch seconds, instances]}."""
+    from taichi.lang import kernel_impl
+    seconds = collections.defaultdict(lambda: [0.0, 0.0, 0])   # ast, first launch, instances
+    launched = set()
+    materialize, launch = kernel_impl.Kernel.materialize, kernel_impl.Kernel.launch_kernel
+
+    def timed_materialize(self, key=None, args=None, arg_features=None):
+        before = len(self.compiled_kernels)
+        t0 = time.perf_counter()
+        out = materialize(self, key, args, arg_features)
+        if len(self.compiled_kernels) > before:
+            row = seconds[self.func.__name__]
+            row[0] += time.perf_counter() - t0
+            row[2] += 1
+        return out
+
+    def timed_launch(self, t_kernel, *args):
+        if id(t_kernel) in launched:
+            return launch(self, t_kernel, *args)
+        launched.add(id(t_kernel))
+        t0 = time.perf_counter()
+        out = launch(self, t_kernel, *args)
+        seconds[self.func.__name__][1] += time.perf_counter() - t0
+        return out
+
+    kernel_impl.Kernel.materialize = timed_materialize
+    kernel_impl.Kernel.launch_kernel = timed_launch
+    return seconds
+
+
+def pytest_sessionstart(session):
+    out_dir = os.environ.get(CENSUS_ENV)
+    if out_dir:
+        session.config._kernel_seconds = log_kernel_compiles()
+
+
+def pytest_sessionfinish(session):
+    out_dir = os.environ.get(CENSUS_ENV)
+    seconds = getattr(session.config, "_kernel_seconds", None)
+    if out_dir and seconds:
+        name = os.environ.get("PYTEST_XDIST_WORKER", "main") + ".kernels.json"
+        with open(os.path.join(out_dir, name), "w", encoding="utf-8") as out:
+            json.dump(dict(seconds), out)

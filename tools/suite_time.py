@@ -63,7 +63,7 @@ def census_env(log_dir: str) -> dict:
 def census(log_dir: str) -> str:
     """The report on the engines logged in ``log_dir`` (one .jsonl file per worker)."""
     per_worker = {}
-    for name in sorted(os.listdir(log_dir)):
+    for name in sorted(n for n in os.listdir(log_dir) if n.endswith(".jsonl")):
         with open(os.path.join(log_dir, name), encoding="utf-8") as src:
             per_worker[name[:-len(".jsonl")]] = [json.loads(line) for line in src]
     rows = [row for worker in per_worker.values() for row in worker]
@@ -77,7 +77,30 @@ def census(log_dir: str) -> str:
             f"({', '.join(str(len(w)) for w in per_worker.values())}), {len(kinds)} kinds; "
             f"{again} of them a kind their worker had built before (Taichi initialised "
             f"again, or more room), {shared} a kind another worker built too. Most by "
-            f"test file: {top}.\n")
+            f"test file: {top}.\n" + kernel_census(log_dir))
+
+
+def kernel_census(log_dir: str, top: int = 12) -> str:
+    """The kernels whose compiles took the most seconds over the workers
+    (``<worker>.kernels.json`` of tools/engine_census_plugin.py), as a table."""
+    totals = collections.defaultdict(lambda: [0.0, 0.0, 0])
+    for name in os.listdir(log_dir):
+        if name.endswith(".kernels.json"):
+            with open(os.path.join(log_dir, name), encoding="utf-8") as src:
+                for kernel, row in json.load(src).items():
+                    totals[kernel] = [a + b for a, b in zip(totals[kernel], row)]
+    if not totals:
+        return ""
+    whole = sum(a + b for a, b, _ in totals.values())
+    rows = sorted(totals.items(), key=lambda item: -(item[1][0] + item[1][1]))[:top]
+    lines = [f"\nKernel compiles over the workers: {whole:.0f} s in all (the AST pass, and "
+             "each compiled instance's first launch: LLVM's compile and one run); the "
+             f"{top} kernels that took the most:\n",
+             "| kernel | instances | AST pass [s] | first launches [s] | share |",
+             "|---|---|---|---|---|"]
+    lines += [f"| {name} | {n} | {ast:.0f} | {first:.0f} | {(ast + first) / whole:.0%} |"
+              for name, (ast, first, n) in rows]
+    return "\n".join(lines) + "\n"
 
 
 def main(argv=None):
