@@ -30,6 +30,7 @@ from .contacts import Contacts
 from .contacts.solver import ContactSolver
 from .fused import FusedStep
 from .grid import Grid, GridGeometry
+from .hostload import FieldLoad
 from .params import StepParams
 from .projection import Projection
 from .state import Features, SphereState
@@ -131,10 +132,19 @@ class Engine:
                                     key.serial_heavy, t,
                                     cpu=key.serial_heavy or key.serial_few) \
             if f.contacts else None
+        # every part's fields loaded from the host, in one kernel (hostload.py)
+        self.host_load = FieldLoad(self._loading_parts(), key.real)
+        for part in self._loading_parts():
+            part.host_load = self.host_load
         self._fused = None
         self._take_out = None      # takeout.SinkTakeOut, built on first use
         self._occupant = None      # weakref to the Simulation bound last
         self._scalars = None       # what the scene's scalars were loaded from (bind)
+
+    def _loading_parts(self) -> tuple:
+        """The parts whose bind loads fields from the host (their loaded_fields)."""
+        return tuple(p for p in (self.state, self.params, self.grid, self.contacts,
+                                 self.solver) if p is not None)
 
     def release(self, sim) -> None:
         """Forget that ``sim`` is bound (its scene changed: the next bind loads it all)."""

@@ -59,6 +59,7 @@ FORWARD_ROWS = ((0, 0, 0, 1), (0, 1, -1, 1), (1, -1, -1, 1), (1, 0, -1, 1), (1, 
 ALL_ROWS = tuple((dx, dy, -1, 1) for dx in (-1, 0, 1) for dy in (-1, 0, 1))
 
 
+
 @dataclasses.dataclass(frozen=True)
 class GridGeometry:
     """Cell layout of the box (pure Python, no Taichi).
@@ -164,6 +165,9 @@ class Grid(CellArithmetic):
         dims: () vec3 i32 cells per axis; cell: () vec3 real cell size [m]; lo, inv_cell:
             () vec3 real box corner [m] and 1/cell [1/m]; n_cells: () i32 = M;
             slack: () real [m] (GridGeometry); scan_size: (levels,) i32 items per level.
+        all_rows: (9,) vec4 i32 — ALL_ROWS, the full stencil as rows (walked by runtime
+            loops in the projection and the contact solver: unrolled, it would
+            multiply their compile time); written by :meth:`bind`.
     """
 
     def __init__(self, cell_capacity: int, periodic: tuple, state: SphereState,
@@ -199,6 +203,9 @@ class Grid(CellArithmetic):
         self.dims = ti.Vector.field(3, ti.i32, shape=())
         self.n_cells = ti.field(ti.i32, shape=())
         self.slack = ti.field(self.real, shape=())
+        self.all_rows = ti.Vector.field(4, ti.i32, shape=len(ALL_ROWS))
+        self.host_load = None      # the engine's hostload.FieldLoad
+        self.scan_sizes = None
 
         # hot kernels as plain closures: a data_oriented method kernel pays ~40 us of
         # Python dispatch per launch for its `self` template argument
@@ -209,6 +216,11 @@ class Grid(CellArithmetic):
 
         self.build = build
 
+    @staticmethod
+    def loaded_fields() -> tuple:
+        """The fields bind loads (hostload.FieldLoad)."""
+        return ("lo", "inv_cell", "cell", "dims", "n_cells", "slack", "scan_size", "all_rows")
+
     def bind(self, geom: GridGeometry):
         """Load the cell layout ``geom`` (at most cell_capacity cells, the periodic axes
         this grid was compiled for)."""
@@ -216,21 +228,13 @@ class Grid(CellArithmetic):
             raise ValueError("grid geometry does not fit these fields")
         self.geom = geom
         self.m = geom.n_cells
-        self.lo[None] = geom.lo
-        self.inv_cell[None] = [1.0 / c for c in geom.cell]
-        self.cell[None] = list(geom.cell)
-        self.dims[None] = list(geom.dims)
-        self.n_cells[None] = geom.n_cells
-        self.slack[None] = geom.slack
-        size = geom.n_cells
-        for level in range(len(self.scan_capacity)):
-            self.scan_size[level] = size
-            size = -(-size // self.scan_block)
-
-    @property
-    def scan_sizes(self):
-        """Items per scan level of the bound geometry (Python ints)."""
-        return [int(self.scan_size[k]) for k in range(len(self.scan_capacity))]
+        sizes = [geom.n_cells]
+        while len(sizes) < len(self.scan_capacity):
+            sizes.append(-(-sizes[-1] // self.scan_block))
+        self.scan_sizes = sizes          # items per scan level (Python ints)
+        self.host_load.write(self, lo=geom.lo, inv_cell=[1.0 / c for c in geom.cell],
+                             cell=geom.cell, dims=geom.dims, n_cells=geom.n_cells,
+                             slack=geom.slack, scan_size=sizes, all_rows=ALL_ROWS)
 
     # ---- build ----
     def scan_buffers(self, first):

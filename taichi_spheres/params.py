@@ -56,6 +56,11 @@ VALUES = ("sep_overlap", "open_overlap", "vmax2", "moved", "energy_pair_restitut
 LAST_OF_SUBSTEPS = ("remaining", "open_overlap", "in_sinks", "vmax2", "moved",
                     "contact_residual", "contact_overlap", "vmax2_near")
 LARGEST_OF_SUBSTEPS = ("sep_overlap", "proj_worst")
+#: the fields StepParams.bind loads from a scene (all but h and the counters), and
+#: with materials the pair tables
+BOUND = ("gravity", "lo", "hi", "size", "e_wall", "rest_speed", "mu_wall", "beta_max",
+         "e", "mu", "mu_roll", "geo", "n_geo", "sink_lo", "sink_hi", "n_sinks")
+PAIR_TABLES = ("pair_e", "pair_mu", "pair_mu_roll")
 
 
 def merge_substeps(before, last):
@@ -129,33 +134,38 @@ class StepParams:
                 values[k] = self.values[k][None]
 
         self._copy_out = copy_out
+        self.host_load = None      # the engine's hostload.FieldLoad
+
+    def loaded_fields(self) -> tuple:
+        """The fields bind loads (hostload.FieldLoad)."""
+        return BOUND + (PAIR_TABLES if self.materials else ())
 
     def bind(self, scene, rest_speed=0.0):
-        """Load a scene's gravity, box, restitutions and the rest speed [m/s]."""
-        self.gravity[None] = scene.gravity.tolist()
-        self.lo[None] = scene.box_lo.tolist()
-        self.hi[None] = scene.box_hi.tolist()
-        self.size[None] = (scene.box_hi - scene.box_lo).tolist()
-        self.e_wall[None] = scene.wall_restitution
-        self.rest_speed[None] = rest_speed
-        self.mu_wall[None] = float(getattr(scene, "wall_friction", 0.0))
-        self.bind_materials(scene)
+        """Load a scene's gravity, box, restitutions, friction coefficients, geometry
+        objects and sinks, and the rest speed [m/s] (one launch: hostload.py)."""
         beta0 = float(getattr(scene, "tangential_restitution", -1.0))
-        self.beta_max[None] = 0.0 if beta0 == -1.0 else beta0
-        self.bind_geometry(getattr(scene, "geometry", ()))
-        self.bind_sinks(getattr(scene, "sinks", ()))
+        values = dict(gravity=scene.gravity, lo=scene.box_lo, hi=scene.box_hi,
+                      size=scene.box_hi - scene.box_lo, e_wall=scene.wall_restitution,
+                      rest_speed=rest_speed,
+                      mu_wall=float(getattr(scene, "wall_friction", 0.0)),
+                      beta_max=0.0 if beta0 == -1.0 else beta0)
+        values.update(self.material_values(scene))
+        values.update(self.geometry_values(getattr(scene, "geometry", ())))
+        values.update(self.sink_values(getattr(scene, "sinks", ())))
+        self.host_load.write(self, **values)
 
-    def bind_materials(self, scene):
-        """Load the pair values: the scalars from the material of sphere 0 (all pairs
-        alike without Features.materials), the tables from scene.pair_values()."""
+    def material_values(self, scene) -> dict:
+        """The pair values: the scalars e, mu, mu_roll from the material of sphere 0 (all
+        pairs alike without Features.materials), and with it the tables of
+        scene.pair_values()."""
         table = scene.pair_values()
         m0 = int(scene.material[0])
-        self.e[None], self.mu[None], self.mu_roll[None] = (float(c) for c in table[m0, m0])
+        out = dict(zip(("e", "mu", "mu_roll"), (float(c) for c in table[m0, m0])))
         if self.materials:
             full = np.zeros((MAX_MATERIALS, MAX_MATERIALS, 3))
             full[:len(table), :len(table)] = table
-            for field, c in zip((self.pair_e, self.pair_mu, self.pair_mu_roll), range(3)):
-                field.from_numpy(full[..., c].astype(self._value_host.dtype))
+            out.update(zip(PAIR_TABLES, (full[..., c] for c in range(3))))
+        return out
 
     @ti.func
     def restitution_of(self, a, b):
@@ -181,28 +191,27 @@ class StepParams:
             out = self.pair_mu_roll[a, b]
         return out
 
-    def bind_sinks(self, sinks):
-        """Load the scene's sink regions (low, high corners [m])."""
+    @staticmethod
+    def sink_values(sinks) -> dict:
+        """The scene's sink regions (low, high corners [m]) as bind loads them."""
         if len(sinks) > MAX_SINKS:
             raise ValueError(f"at most {MAX_SINKS} sinks, got {len(sinks)}")
         lo = np.zeros((MAX_SINKS, 3))
         hi = np.zeros((MAX_SINKS, 3))
         for k, sink in enumerate(sinks):
             lo[k], hi[k] = sink.low, sink.high
-        dtype = self._value_host.dtype
-        self.sink_lo.from_numpy(lo.astype(dtype))
-        self.sink_hi.from_numpy(hi.astype(dtype))
-        self.n_sinks[None] = len(sinks)
+        return dict(sink_lo=lo, sink_hi=hi, n_sinks=len(sinks))
 
-    def bind_geometry(self, geometry):
-        """Load the packed rows of the scene's geometry objects (geometry.py)."""
+    @staticmethod
+    def geometry_values(geometry) -> dict:
+        """The packed rows of the scene's geometry objects (geometry.py) as bind loads
+        them."""
         if len(geometry) > MAX_GEOMETRY:
             raise ValueError(f"at most {MAX_GEOMETRY} geometry objects, got {len(geometry)}")
         table = np.zeros((MAX_GEOMETRY, GEOMETRY_WIDTH), dtype=np.float64)
         for k, g in enumerate(geometry):
             table[k] = g.packed()
-        self.geo.from_numpy(table.astype(self._value_host.dtype))
-        self.n_geo[None] = len(geometry)
+        return dict(geo=table, n_geo=len(geometry))
 
     @ti.func
     def in_a_sink(self, x) -> bool:

@@ -25,7 +25,6 @@ positions are the same bits as with a full scan every iteration
 sphere (``rmax``) and reduced over all spheres once at the end.
 """
 
-import numpy as np
 import taichi as ti
 
 from .config import DEFAULT, Tuning
@@ -43,7 +42,8 @@ class Projection:
     examined (exact for every sphere, see the module docstring); involved (N,) /
     n_involved — spheres with a pair above tolerance in the last iteration; near (N,) /
     n_near — the spheres the next iteration examines, marked by ``stamp`` (N,) i32 =
-    the iteration that listed them; worst (0-d) real — largest relative overlap the
+    the iteration that listed them (iterations count from 1: 0, as allocated, lists
+    none); worst (0-d) real — largest relative overlap the
     last iteration measured (before its push) among the pairs it examined, or over all
     spheres after ``finish``; pushed (0-d) i32 — pairs pushed by the last iteration."""
 
@@ -73,11 +73,6 @@ class Projection:
         self.iteration = ti.field(ti.i32, shape=())
         self.worst = ti.field(self.real, shape=())
         self.pushed = ti.field(ti.i32, shape=())
-        self.stamp.fill(-1)
-        # the 27-cell stencil as a table walked by a runtime loop (unrolled, it would
-        # multiply compile time; contacts' walks skip the cells they cannot reach)
-        self.all_rows = ti.Vector.field(4, ti.i32, shape=len(ALL_ROWS))
-        self.all_rows.from_numpy(np.array(ALL_ROWS, dtype=np.int32))
 
         @ti.kernel
         def project_all():
@@ -155,7 +150,7 @@ class Projection:
         ci = self.grid.coords(self.grid.cell_of[i])
         it = self.iteration[None]
         for k in range(ti.static(len(ALL_ROWS))):
-            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
+            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.grid.all_rows[k])
             for q in range(a0, b0):
                 self.list_once(self.grid.order[q], it)
             for q in range(a1, b1):
@@ -179,7 +174,7 @@ class Projection:
         if ti.static(not self.f.equal_masses):
             wi_num = self.state.inv_mass_of(i)
         for k in range(ti.static(len(ALL_ROWS))):
-            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[k])
+            a0, b0, a1, b1 = self.grid.row_ranges(ci, self.grid.all_rows[k])
             for q in range(a0, b0):
                 dx, rel = self.pair_push(xi, i, q, wi_num, tol)
                 acc += dx

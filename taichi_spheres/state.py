@@ -192,6 +192,7 @@ class SphereState:
         self.m0 = ti.field(real, shape=())
         self.inv_m0 = ti.field(real, shape=())
         self.inv_i0 = ti.field(real, shape=())
+        self.host_load = None      # the engine's hostload.FieldLoad
         np_real = np.float64 if real == ti.f64 else np.float32
 
         @ti.kernel
@@ -235,7 +236,6 @@ class SphereState:
         if scene.n > self.capacity:
             raise ValueError(f"{scene.n} spheres do not fit fields for {self.capacity}")
         self.n = scene.n
-        self.n_spheres[None] = scene.n
         self.bind_uniform(scene)
         self.load(x, v, scene.radius, scene.mass, omega)
         if self.features.materials:
@@ -244,16 +244,23 @@ class SphereState:
             self.material.from_numpy(index)
 
     def bind_uniform(self, scene: Scene):
-        """r0, m0 [m, kg]: the radius and mass of the scene's first sphere (those of
-        every sphere where they are equal), and their inverses (set_uniform_inverses)."""
-        self.r0[None] = float(scene.radius[0])
-        self.m0[None] = float(scene.mass[0])
-        self.set_uniform_inverses()
+        """n_spheres = scene.n; r0, m0 [m, kg]: the radius and mass of the scene's first
+        sphere (those of every sphere where they are equal), and their inverses
+        (set_uniform)."""
+        self.host_load.write(self, r0=float(scene.radius[0]), m0=float(scene.mass[0]))
+        self.set_uniform(scene.n)
+
+    @staticmethod
+    def loaded_fields() -> tuple:
+        """The fields bind loads (hostload.FieldLoad; n_spheres, which a take-out
+        changes in a kernel, is set_uniform's)."""
+        return ("r0", "m0")
 
     @ti.kernel
-    def set_uniform_inverses(self):
-        """inv_m0 = 1/m0 and inv_i0 = 1/I(m0, r0), in the fields' precision, as a row
-        update would divide them (same bits)."""
+    def set_uniform(self, n: ti.i32):
+        """n_spheres = n; inv_m0 = 1/m0 and inv_i0 = 1/I(m0, r0), in the fields'
+        precision, as a row update would divide them (same bits)."""
+        self.n_spheres[None] = n
         self.inv_m0[None] = 1 / self.m0[None]
         self.inv_i0[None] = self.solid_inv_inertia(self.m0[None], self.r0[None])
 

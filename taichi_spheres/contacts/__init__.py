@@ -85,6 +85,7 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
         self.approach_eps = 8.0 * eps
         self.near_lists = near_lists
         self._allocate_fields(grid.cell_capacity, state.capacity)
+        self.host_load = None      # the engine's hostload.FieldLoad
         self.near_ready = False     # a full scan made a complete list (Python's copy)
         self._build_kernels()
 
@@ -96,10 +97,9 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
         self.cell_pairs = ti.Vector.field(2, ti.i32, shape=(cells, self.perf.recorded_pairs))
         # stencils as small tables walked by runtime loops (unrolling them multiplies
         # compile time)
+        # (both written by bind)
         self.fwd_rows = ti.Vector.field(4, ti.i32, shape=len(FORWARD_ROWS))
-        self.fwd_rows.from_numpy(np.array(FORWARD_ROWS, dtype=np.int32))
         self.block = ti.Vector.field(3, ti.i32, shape=(len(BLOCK_PAIRS), 2))
-        self.block.from_numpy(np.array(BLOCK_PAIRS, dtype=np.int32))
         self.colours = ()
         # colours per axis (1-3) and 1 where the last cell of an odd periodic axis has
         # a colour of its own (see colour_index), of the bound geometry
@@ -203,6 +203,11 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
         self.sweep_mixed = sweep_mixed
         self.after_sweep_parallel = after_sweep_parallel
 
+    def loaded_fields(self) -> tuple:
+        """The fields bind loads (hostload.FieldLoad)."""
+        return ("axis_colours", "odd_last", "half_m0", "walk_reach", "fwd_rows", "block") + (
+            ("near_reach2", "near_allowance2") if self.near_lists else ())
+
     def bind(self, scene, geom, perf: Performance):
         """Load what the kernels read of a scene and its grid geometry ``geom`` (after
         state.bind and grid.bind), and the bound Simulation's options ``perf``
@@ -218,20 +223,23 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
         reach; the near lists are forgotten (their sphere indices are the scene's)."""
         self.n = scene.n
         self.colours = geom.colours
-        self.axis_colours[None] = [len(geom.axis_colours(a)) for a in range(3)]
-        self.odd_last[None] = [int(p and d % 2 == 1) for p, d in zip(geom.periodic, geom.dims)]
-        self.half_m0[None] = 0.5 * float(scene.mass[0])
         # round-off allowance of the cells a walk skips (examine_around) [m]: positions
         # and cell faces carry a few eps of the largest coordinate
         extent = max(max(abs(a), abs(b)) for a, b in zip(scene.box_lo, scene.box_hi))
         r_max = float(scene.radius.max())
-        self.walk_reach[None] = r_max + 64.0 * self.eps * (extent + max(geom.cell))
+        values = dict(
+            fwd_rows=FORWARD_ROWS, block=BLOCK_PAIRS,
+            axis_colours=[len(geom.axis_colours(a)) for a in range(3)],
+            odd_last=[int(p and d % 2 == 1) for p, d in zip(geom.periodic, geom.dims)],
+            half_m0=0.5 * float(scene.mass[0]),
+            walk_reach=r_max + 64.0 * self.eps * (extent + max(geom.cell)))
         self.near_reach, allowance = near_allowance(geom, r_max, self.perf.near_safety)
         if self.near_lists:
             if not allowance > 0:
                 raise ValueError("near lists need cells wider than the largest diameter")
-            self.near_reach2[None] = self.near_reach ** 2
-            self.near_allowance2[None] = allowance * allowance
+            values.update(near_reach2=self.near_reach ** 2,
+                          near_allowance2=allowance * allowance)
+        self.host_load.write(self, **values)
         self.near_ready = False
 
     @ti.func

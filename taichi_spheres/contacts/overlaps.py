@@ -72,7 +72,7 @@ class OverlapMeasure:
                 if ti.static(self.f.walls or self.f.geometry):
                     worst = self.boundary_overlap(i, xi)
                 for row in range(ti.static(len(ALL_ROWS))):
-                    a0, b0, a1, b1 = self.grid.row_ranges(ci, self.all_rows[row])
+                    a0, b0, a1, b1 = self.grid.row_ranges(ci, self.grid.all_rows[row])
                     for q in range(a0, b0):
                         worst = ti.max(worst, self.pair_overlap(i, xi, q))
                     for q in range(a1, b1):

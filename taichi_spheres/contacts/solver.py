@@ -53,11 +53,10 @@ whose last sweep still changed the positions by more than half of
 A mixin-free class over the engine's state, grid, parameters and pair geometry.
 """
 
-import numpy as np
 import taichi as ti
 
 from ..config import DEFAULT, Tuning
-from ..grid import ALL_ROWS, Grid
+from ..grid import Grid
 from ..params import StepParams
 from ..state import Features, SphereState
 from .friction_rows import FrictionRows
@@ -104,7 +103,7 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         v_pre, w: (N,) vec3 — velocities before the solve, pseudo-velocities [m/s]
         unrowed: (N,) i32 — 1 for a sphere with an impact to come and no row for it
             this step (rows.py; overlaps.py measures its pairs and walls, then clears
-            it); all_rows: grid.ALL_ROWS, the full stencil
+            it)
         w_pre: (N,) vec3, only with friction — spins before the solve [rad/s]
         x_pre: (N,) vec3 — positions before the solve [m]
         drop: (N,) real, only with gravity — how far close_support_gaps lowers a
@@ -148,7 +147,9 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         self.halved_residual = features.equal_masses and not features.friction
         self.packed = packs_rows(features, state.capacity, cpu)
         self._allocate(state.capacity, grid.cell_capacity)
-        self.load_sweep_rules(self.rules)      # (each bind loads its Simulation's)
+        self.host_load = None      # the engine's hostload.FieldLoad
+        self.relaxation = self.rules.relaxation     # (each bind loads its Simulation's)
+        self.extension = self.rules.position_extension
         self._build_kernels()
 
     def _allocate(self, cap: int, cells: int):
@@ -171,8 +172,6 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         self.w = ti.Vector.field(3, real, shape=cap)
         self.unrowed = ti.field(ti.i32, shape=cap)
         self.drop = ti.field(real, shape=cap) if self.f.gravity else None
-        self.all_rows = ti.Vector.field(4, ti.i32, shape=len(ALL_ROWS))
-        self.all_rows.from_numpy(np.array(ALL_ROWS, dtype=np.int32))
         self.warm_key = ti.field(ti.i32, shape=(cap, slots))
         self.warm_lam = ti.field(real, shape=(cap, slots))
         self.warm_n = ti.field(ti.i32, shape=cap)
@@ -252,10 +251,14 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         self.bind_scalars(scene, geom, reach)
         self.load_sweep_rules(rules)
         self.load_host_options(perf)
-        self.h_prev[None] = 0
-        self.warm_n.fill(0)
-        self.state.loaded.fill(0)
-        self.state.near.fill(0)
+        self._forget_warm_start()
+
+    @staticmethod
+    def loaded_fields() -> tuple:
+        """The fields bind loads (hostload.FieldLoad): the sweep rules and the scalars
+        of the scene."""
+        return ("omega_relax", "relax_on", "full_v", "full_w", "cap_x", "plain_sweeps",
+                "min_scaled", "n_colours_f", "tol_len", "margin", "quiet_len")
 
     def load_host_options(self, perf) -> None:
         """The options of ``perf`` (config.Performance) that solve() reads
@@ -289,28 +292,28 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         kernels read from fields: relaxation, sweep caps, plain sweeps, fewest scaled
         sweeps (pgs.set_cap, pgs.sweep_relaxation)."""
         self.relaxation = rules.relaxation
-        self.omega_relax[None] = rules.relaxation
-        # (decided on the double, as the host's loop decides it, not on a rounded f32)
-        self.relax_on[None] = int(rules.relaxation != 1)
-        self.full_v[None] = rules.contact_iterations
-        self.full_w[None] = rules.position_iterations
-        self.cap_x[None] = rules.position_extension
         self.extension = rules.position_extension
-        self.plain_sweeps[None] = rules.plain_sweeps
-        self.min_scaled[None] = rules.min_scaled_sweeps
+        self.host_load.write(
+            self, omega_relax=rules.relaxation,
+            # (decided on the double, as the host's loop decides it, not on a rounded f32)
+            relax_on=int(rules.relaxation != 1),
+            full_v=rules.contact_iterations, full_w=rules.position_iterations,
+            cap_x=rules.position_extension, plain_sweeps=rules.plain_sweeps,
+            min_scaled=rules.min_scaled_sweeps)
 
     def bind_scalars(self, scene, geom, reach=None):
         """bind's values that follow from the scene and ``geom``: colours, tolerances,
         margins and the sphere count (the warm start stays)."""
         self.n_colours = len(geom.colours)
-        self.n_colours_f[None] = self.n_colours
-        # a tenth of the overlap tolerance of the smallest contact distance [m]
-        self.tol_len[None] = 0.1 * self.rules.overlap_tolerance * 2.0 * float(scene.radius.min())
-        self.margin[None] = geom.slack if reach is None else min(geom.slack, reach)
         # reach = contact_margin D (Simulation._bind): a held bed's step moves at most
         # (contact_margin - 1) D; without reach it is unknown (0: pgs.set_cap's full caps)
         margin = self.rules.contact_margin
-        self.quiet_len[None] = 0.0 if reach is None else max(margin - 1.0, 0.0) * reach / margin
+        self.host_load.write(
+            self, n_colours_f=self.n_colours,
+            # a tenth of the overlap tolerance of the smallest contact distance [m]
+            tol_len=0.1 * self.rules.overlap_tolerance * 2.0 * float(scene.radius.min()),
+            margin=geom.slack if reach is None else min(geom.slack, reach),
+            quiet_len=0.0 if reach is None else max(margin - 1.0, 0.0) * reach / margin)
         self.n = scene.n
 
     @ti.func
@@ -569,6 +572,14 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         self._build_sweep_kernels()
 
         @ti.kernel
+        def forget_warm_start():
+            self.h_prev[None] = 0
+            for i in range(self.warm_n.shape[0]):
+                self.warm_n[i] = 0
+                self.state.loaded[i] = 0
+                self.state.near[i] = 0
+
+        @ti.kernel
         def bound_warm():
             self.bound_warm_start()
 
@@ -589,6 +600,7 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         self._serial_solves = {}
         self._start, self._middle, self._end = start, middle, end
         self._bound_warm = bound_warm
+        self._forget_warm_start = forget_warm_start
 
     def _build_sweep_kernels(self):
         """The kernel factories of the parallel sweeps (built per mode and colour count

@@ -54,42 +54,96 @@ class WarmTable:
     """warm_rows, load_warm and keep_spheres over ContactSolver's fields (module
     docstring)."""
 
+    def _warm_arrays(self, n: int) -> dict:
+        """Host arrays for the table of n spheres in the fields' types: key, lam, kept,
+        flags (loaded, near), h (h_prev), t and r (warm_t, warm_r: (1, 1, 3) where the
+        solver has none)."""
+        real = np.float64 if self.real == ti.f64 else np.float32
+        slots = self.warm_key.shape[1]
+        vector = {name: (n if getattr(self, "warm_" + name) is not None else 1)
+                  for name in ("t", "r")}
+        return dict(key=np.zeros((n, slots), np.int32), lam=np.zeros((n, slots), real),
+                    kept=np.zeros(n, np.int32), flags=np.zeros((n, 2), np.int32),
+                    h=np.zeros(1, real),
+                    **{name: np.zeros((rows, slots if rows == n else 1, 3), real)
+                       for name, rows in vector.items()})
+
     def warm_rows(self, n: int) -> dict:
-        """The warm-start table of the first n spheres (numpy copies) and h_prev [s]."""
-        out = dict(key=self.warm_key.to_numpy()[:n], lam=self.warm_lam.to_numpy()[:n],
-                   kept=self.warm_n.to_numpy()[:n], loaded=self.state.loaded.to_numpy()[:n],
-                   h_prev=float(self.h_prev[None]))
+        """The warm-start table of the first n spheres (numpy copies) and h_prev [s]
+        (one launch)."""
+        a = self._warm_arrays(n)
+        self._read_warm(n, a["key"], a["lam"], a["kept"], a["flags"], a["h"], a["t"], a["r"])
+        out = dict(key=a["key"], lam=a["lam"], kept=a["kept"], loaded=a["flags"][:, 0].copy(),
+                   h_prev=float(a["h"][0]))
         if self.rules.substeps:
-            out["near"] = self.state.near.to_numpy()[:n]
-        for name in ("warm_t", "warm_r"):
-            if getattr(self, name) is not None:
-                out[name] = getattr(self, name).to_numpy()[:n]
+            out["near"] = a["flags"][:, 1].copy()
+        for name in ("t", "r"):
+            if getattr(self, "warm_" + name) is not None:
+                out["warm_" + name] = a[name]
         return out
 
     def load_warm(self, warm: dict) -> None:
-        """Load a table written by :meth:`warm_rows` (same precision and slots)."""
+        """Load a table written by :meth:`warm_rows` (same precision and slots) into the
+        first rows (one launch; a table without "near" marks every sphere near, one
+        without warm_t or warm_r leaves those fields as they are)."""
         n = len(warm["kept"])
-        key = self.warm_key.to_numpy()
-        lam = self.warm_lam.to_numpy()
-        kept = self.warm_n.to_numpy()
-        loaded = self.state.loaded.to_numpy()
-        key[:n], lam[:n], kept[:n] = warm["key"], warm["lam"], warm["kept"]
-        loaded[:n] = warm["loaded"]
-        self.state.loaded.from_numpy(loaded)
-        if self.rules.substeps:      # (a table without: every sphere counts as near)
-            near = self.state.near.to_numpy()
-            near[:n] = warm["near"] if "near" in warm else 1
-            self.state.near.from_numpy(near)
-        self.warm_key.from_numpy(key)
-        self.warm_lam.from_numpy(lam)
-        self.warm_n.from_numpy(kept)
-        self.h_prev[None] = warm["h_prev"]
-        for name in ("warm_t", "warm_r"):
-            field = getattr(self, name)
-            if field is not None and name in warm:
-                table = field.to_numpy()
-                table[:n] = warm[name]
-                field.from_numpy(table)
+        a = self._warm_arrays(n)
+        a["key"][:], a["lam"][:], a["kept"][:] = warm["key"], warm["lam"], warm["kept"]
+        a["flags"][:, 0] = warm["loaded"]
+        a["flags"][:, 1] = warm["near"] if "near" in warm else 1
+        a["h"][0] = warm["h_prev"]
+        has = {}
+        for name in ("t", "r"):
+            has[name] = int(getattr(self, "warm_" + name) is not None and "warm_" + name in warm)
+            if has[name]:
+                a[name][:] = warm["warm_" + name]
+        self._write_warm(n, a["key"], a["lam"], a["kept"], a["flags"], a["h"], a["t"], a["r"],
+                         has["t"], has["r"])
+
+    @ti.kernel
+    def _read_warm(self, n: ti.i32, key: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                   lam: ti.types.ndarray(ndim=2), kept: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                   flags: ti.types.ndarray(dtype=ti.i32, ndim=2), h: ti.types.ndarray(ndim=1),
+                   t: ti.types.ndarray(ndim=3), r: ti.types.ndarray(ndim=3)):
+        """The table's first n rows into the arrays (_warm_arrays)."""
+        for i in range(n):
+            kept[i] = self.warm_n[i]
+            flags[i, 0] = self.state.loaded[i]
+            flags[i, 1] = self.state.near[i]
+            for s in range(self.warm_key.shape[1]):
+                key[i, s] = self.warm_key[i, s]
+                lam[i, s] = self.warm_lam[i, s]
+                for c in ti.static(range(3)):
+                    if ti.static(has_field(self, "warm_t")):
+                        t[i, s, c] = self.warm_t[i, s][c]
+                    if ti.static(has_field(self, "warm_r")):
+                        r[i, s, c] = self.warm_r[i, s][c]
+        h[0] = self.h_prev[None]
+
+    @ti.kernel
+    def _write_warm(self, n: ti.i32, key: ti.types.ndarray(dtype=ti.i32, ndim=2),
+                    lam: ti.types.ndarray(ndim=2), kept: ti.types.ndarray(dtype=ti.i32, ndim=1),
+                    flags: ti.types.ndarray(dtype=ti.i32, ndim=2), h: ti.types.ndarray(ndim=1),
+                    t: ti.types.ndarray(ndim=3), r: ti.types.ndarray(ndim=3), has_t: ti.i32,
+                    has_r: ti.i32):
+        """The arrays (_warm_arrays) into the table's first n rows (near only with
+        substeps; warm_t, warm_r where has_t, has_r)."""
+        for i in range(n):
+            self.warm_n[i] = kept[i]
+            self.state.loaded[i] = flags[i, 0]
+            if ti.static(self.rules.substeps):
+                self.state.near[i] = flags[i, 1]
+            for s in range(self.warm_key.shape[1]):
+                self.warm_key[i, s] = key[i, s]
+                self.warm_lam[i, s] = lam[i, s]
+                for c in ti.static(range(3)):
+                    if ti.static(has_field(self, "warm_t")):
+                        if has_t:
+                            self.warm_t[i, s][c] = t[i, s, c]
+                    if ti.static(has_field(self, "warm_r")):
+                        if has_r:
+                            self.warm_r[i, s][c] = r[i, s, c]
+        self.h_prev[None] = h[0]
 
     def keep_spheres(self, scene, geom, reach, kept) -> None:
         """After a sink took spheres out of the bound scene: ``scene`` holds the spheres
