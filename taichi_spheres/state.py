@@ -88,6 +88,12 @@ class Features:
     def periodic(self) -> bool:
         return not all(self.wall_axes)
 
+    @property
+    def wall_bits(self) -> int:
+        """Bit a set for each axis a with walls (loops over the walls that take the axis
+        at run time: walls.py, contacts/rows.py)."""
+        return sum(1 << a for a, w in enumerate(self.wall_axes) if w)
+
     def describe(self, shock: bool = False) -> list:
         """Human-readable list of what is compiled in and out (``shock``: the contact
         solver's shock propagation pass, contacts/shock.py ``shock_compiled``)."""

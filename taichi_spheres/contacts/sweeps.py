@@ -112,17 +112,16 @@ class ColourSweeps:
         bi = -1
         bj = -1
         best = ti.cast(-1, self.real)
-        sa = self.pair_contact(a[0], a[1])
-        if self.eligible(a[0], a[1], sa):
-            bi = a[0]
-            bj = a[1]
-            best = sa
-        if count == 2:
-            sb = self.pair_contact(b[0], b[1])
-            if sb > best and self.eligible(b[0], b[1], sb):
-                bi = b[0]
-                bj = b[1]
-                best = sb
+        for m in range(count):    # a, then b: one inlined copy of the pair's tests
+            pair = a
+            if m == 1:
+                pair = b
+            s = self.pair_contact(pair[0], pair[1])
+            # (s > -1 holds where eligible; Taichi's `and` evaluates both sides)
+            if s > best and self.eligible(pair[0], pair[1], s):
+                bi = pair[0]
+                bj = pair[1]
+                best = s
         return bi, bj, best
 
     @ti.func
@@ -148,13 +147,17 @@ class ColourSweeps:
         (order inside a colour is thread-dependent and irrelevant: its blocks are
         disjoint). Call at kernel top level (or where everything runs serially, as in
         the fused step)."""
-        for c in ti.static(range(MAX_COLOURS + 1)):
+        # (the zeroing and the prefix sum as serial runtime loops: unrolled, their 28
+        # steps were over a quarter of the field accesses sweep_serial compiled)
+        ti.loop_config(serialize=True)
+        for c in range(MAX_COLOURS + 1):
             self.colour_start[c] = 0
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
         for t in range(self.n_active[None]):
             col = self.colour_index(self.grid.coords(self.active_list[t]))
             ti.atomic_add(self.colour_start[col + 1], 1)
-        for c in ti.static(range(MAX_COLOURS)):
+        ti.loop_config(serialize=True)
+        for c in range(MAX_COLOURS):
             self.colour_start[c + 1] += self.colour_start[c]
             self.colour_fill[c] = self.colour_start[c]
         ti.loop_config(serialize=ti.static(self.serial_light or serial))
