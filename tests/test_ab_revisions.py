@@ -48,3 +48,15 @@ def test_bad_option_combinations_are_refused(argv, message, capsys):
     with pytest.raises(SystemExit):
         ab_revisions.main(["HEAD~1", "HEAD", *argv])
     assert message in capsys.readouterr().err
+
+
+def test_kernel_compiles_table_compares_the_revisions_kernel_by_kernel():
+    import kernel_compiles    # (tools/kernel_compiles.py)
+    a = kernel_compiles.medians([dict(wall=4.0, kernels=dict(solve=2.0, drift=0.5)),
+                                 dict(wall=6.0, kernels=dict(solve=3.0, drift=0.5))])
+    b = dict(wall=2.5, kernels=dict(solve=1.5, load=0.25))
+    rows = kernel_compiles.table(("old", "new"), "pour", "fast", dict(old=a, new=b), top=3)
+    assert rows[0] == "| pour | fast | first step (build + advance) | 5.00 | 2.50 | 0.50 |"
+    assert rows[1] == "| | | all kernels' compiles | 3.00 | 1.75 | 0.58 |"
+    assert rows[2:] == ["| | | solve | 2.50 | 1.50 | 0.60 |", "| | | drift | 0.50 | 0.00 | 0.00 |",
+                        "| | | load | 0.00 | 0.25 | new |"]
