@@ -116,8 +116,8 @@ class Motion(Surfaces):
             e_w = ti.cast(1, self.real)
             if ti.static(not self.f.elastic_walls):
                 e_w = self.params.e_wall[None]
-            for a in range(3):      # the axis at run time: one inlined copy of its walls
-                if (ti.static(self.f.wall_bits) >> a) & 1 == 1:
+            for a in ti.static(range(3)):
+                if ti.static(self.f.wall_axes[a]):
                     x, v, moved = self.walls_on_axis(i, a, x, v, moved, r, h, e_w)
             self.state.moved[i] += moved
         self.state.x[i] = x
@@ -136,16 +136,13 @@ class Motion(Surfaces):
         return x
 
     @ti.func
-    def walls_on_axis(self, i, a, x, v, moved, r, h, e_w):
+    def walls_on_axis(self, i, a: ti.template(), x, v, moved, r, h, e_w):
         """The walls of axis a for sphere i of radius r [m] at x, v: bounce while it is
         past one (up to max_bounces times, then rest on it); returns x, v and the bound
         ``moved`` [m] grown by the moves. With the contact solver, a slow contact is
-        left to it (module docstring). Under gravity every axis takes the accelerated
-        path with its component of gravity: on an axis without, acc = 0 (or -0) gives
-        the bits of the unaccelerated path (_contact_time's acc == 0 branch, put_back's
-        mirror; the rebound's terms in acc add zeros to nonzero values)."""
+        left to it (module docstring)."""
         g_a = ti.cast(0, self.real)
-        if ti.static(self.f.gravity):
+        if ti.static(self.f.gravity_axes[a]):
             g_a = self.params.gravity[None][a]
         lo_c = self.params.lo[None][a] + r
         hi_c = self.params.hi[None][a] - r
@@ -162,7 +159,7 @@ class Motion(Surfaces):
                 break
             w = v[a] * side * -1
             acc = g_a * side * -1
-            s = self._contact_time(d, w, acc, self.f.gravity)
+            s = self._contact_time(d, w, acc, self.f.gravity_axes[a])
             if ti.static(self.f.contacts):
                 if self.persistent(i, w, acc, s):
                     break
@@ -178,7 +175,7 @@ class Motion(Surfaces):
                     jn = (va * side * -1 - acc * s) - (w - acc * s)
                     x, v, moved = self.wall_friction(i, a, side, x, v, s, jn, r, moved)
             elif not last:
-                xa, va, moved = self.put_back(i, d, w, acc, side, lo_c, hi_c, e_w, moved)
+                xa, va, moved = self.put_back(i, d, w, acc, side, lo_c, hi_c, e_w, moved, a)
             else:
                 # still past the wall after max_bounces bounces: rest on it
                 if side < 0:
@@ -194,7 +191,7 @@ class Motion(Surfaces):
         return x, v, moved
 
     @ti.func
-    def wall_friction(self, i, a, side, x, v, s, jn, r, moved):
+    def wall_friction(self, i, a: ti.template(), side, x, v, s, jn, r, moved):
         """Tangential impulse of Walton's model (contacts/friction.py) for sphere i (radius
         r [m]) that hit the wall of axis a (side -1: lo, 1: hi) s [s] ago with a normal
         speed change jn [m/s] (its normal impulse / m): applied at contact and carried
@@ -288,7 +285,7 @@ class Motion(Surfaces):
         return xa, va, moved
 
     @ti.func
-    def put_back(self, i, d, w, acc, side, lo_c, hi_c, e_w, moved):
+    def put_back(self, i, d, w, acc, side, lo_c, hi_c, e_w, moved, a: ti.template()):
         """Past the wall without a crossing on its current path (a pair collision
         carried it there, or it rests on the wall): without gravity on the axis mirror
         it into the box and reflect (energy exact for e = 1); with gravity put it on the
@@ -296,7 +293,7 @@ class Motion(Surfaces):
         energy, so energy never grows (a sphere resting under gravity stays at rest).
         Returns the new coordinate [m], velocity component [m/s] and moved [m]."""
         mirror = True
-        if ti.static(self.f.gravity):
+        if ti.static(self.f.gravity_axes[a]):
             mirror = acc == 0
         xa = lo_c
         if side > 0:
