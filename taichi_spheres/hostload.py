@@ -1,11 +1,10 @@
 """Loading a part's small fields from the host in one kernel launch.
 
 A Python-scope write of a Taichi field (``f[None] = x``, ``f.from_numpy(a)``, ``f.fill(x)``)
-compiles a kernel of its own for that field on its first use: about 20 ms for a scalar
-and 55 ms for a vector on the CPU, 50-70 ms for a from_numpy. An engine's parts load
-some forty scalars and a few small tables when a Simulation binds them, which made a
-quarter of a small engine's compile time. An engine's :class:`FieldLoad` writes all
-of them in one kernel, compiled once per engine (engine.py).
+compiles a small kernel of its own for that field on its first use. An engine's parts
+load some forty scalars and a few small tables when a Simulation binds them; an
+engine's :class:`FieldLoad` writes all of them in one kernel, compiled once per engine
+(engine.py; what it saves: docs/bench.md, "Kernel compiles").
 """
 
 import math
@@ -20,7 +19,11 @@ __all__ = ["FieldLoad"]
 def _layout(field):
     """(is_int, shape, width, size) of a field: its index shape, the vector width
     (0 for a scalar field) and the values it holds."""
-    width = field.n if isinstance(field, MatrixField) else 0
+    width = 0
+    if isinstance(field, MatrixField):
+        if field.m != 1:
+            raise TypeError(f"FieldLoad takes scalar and vector fields, not {field.n}x{field.m}")
+        width = field.n
     is_int = field.dtype == ti.i32
     shape = tuple(field.shape)
     return is_int, shape, width, math.prod(shape) * max(width, 1)
@@ -38,21 +41,35 @@ class FieldLoad:
     def __init__(self, parts, real):
         self.np_real = np.float64 if real == ti.f64 else np.float32
         fields, layout, offsets, self.where = [], [], [], {}
-        sizes = [0, 0]
+        sizes = [0, 0]      # reals, ints
+        self.names = []     # (part's class, field name) of each field, in order
         for part in parts:
             for name in part.loaded_fields():
                 field = getattr(part, name)
                 is_int, shape, width, size = _layout(field)
                 if not is_int and field.dtype != real:
                     raise TypeError(f"field {name!r} holds {field.dtype}, not {real} or i32")
-                self.where[(id(part), name)] = (is_int, sizes[is_int], size)
+                kind = int(is_int)
+                self.where[(id(part), name)] = (is_int, sizes[kind], size)
+                self.names.append((type(part).__name__, name))
                 fields.append(field)
                 layout.append((is_int, shape, width))
-                offsets.append(sizes[is_int])
-                sizes[is_int] += size
+                offsets.append(sizes[kind])
+                sizes[kind] += size
         self.reals = np.zeros(max(sizes[0], 1), dtype=self.np_real)
         self.ints = np.zeros(max(sizes[1], 1), dtype=np.int32)
-        self._kernel = self._build(tuple(fields), tuple(layout), tuple(offsets), real)
+        self.fields, self.layout, self.offsets = tuple(fields), tuple(layout), tuple(offsets)
+        self._kernel = self._build(self.fields, self.layout, self.offsets, real)
+
+    def host_values(self) -> list:
+        """((part's class, name), field, host copy of its values as the field's numpy
+        array) of every field of the set, in order."""
+        out = []
+        for key, field, (is_int, shape, width), at in zip(self.names, self.fields,
+                                                         self.layout, self.offsets):
+            flat = (self.ints if is_int else self.reals)[at:at + _size((is_int, shape, width))]
+            out.append((key, field, flat.reshape(shape + ((width,) if width else ()))))
+        return out
 
     def write(self, part, **values) -> None:
         """Load ``part``'s fields named in ``values`` (a number for a scalar field, an
@@ -81,10 +98,10 @@ class FieldLoad:
                   for store in _stores(k, layout[k], offsets[k])]
         chunks = [stores[c:c + 32] for c in range(0, len(stores), 32)]
         tables = [k for k in range(len(fields)) if layout[k][1]]
-        starts, ends, total = [], [], 0
+        starts, ends, total = [], [], 0         # in elements (values / width)
         for k in tables:
             starts.append(total)
-            total += _size(layout[k])
+            total += math.prod(layout[k][1])
             ends.append(total)
 
         @ti.kernel
@@ -97,8 +114,8 @@ class FieldLoad:
                 for m in ti.static(range(len(tables))):
                     k = ti.static(tables[m])
                     if starts[m] <= t < ends[m]:
-                        _store_at(fields[k], layout[k], offsets[k], t - starts[m],
-                                  reals, ints)
+                        _store_element(fields[k], layout[k], offsets[k], t - starts[m],
+                                       reals, ints)
 
         return load_fields
 
@@ -129,22 +146,23 @@ def _store(field: ti.template(), store: ti.template(), reals: ti.template(),
 
 
 @ti.func
-def _store_at(field: ti.template(), layout: ti.template(), at: ti.template(), local,
-              reals: ti.template(), ints: ti.template()):
-    """Value ``local`` (row-major, components last) of ``field`` from position at +
-    local of ``ints`` (an i32 field) or ``reals``."""
+def _store_element(field: ti.template(), layout: ti.template(), at: ti.template(), element,
+                   reals: ti.template(), ints: ti.template()):
+    """Element ``element`` (row-major) of ``field``, its components one after the other,
+    from position at + element x width of ``ints`` (an i32 field) or ``reals``."""
     is_int, shape, width = ti.static(layout)
     src = ti.static(ints if is_int else reals)
-    strides = ti.static(_strides(shape, width))
-    rest = local
+    strides = ti.static(_strides(shape, 0))
+    rest = element
     index = ti.Vector.zero(ti.i32, ti.static(len(shape)))
     for d in ti.static(range(len(shape))):
         index[d] = rest // strides[d]
         rest = rest % strides[d]
     if ti.static(width == 0):
-        field[index] = src[at + local]
+        field[index] = src[at + element]
     else:
-        field[index][rest] = src[at + local]
+        for comp in ti.static(range(width)):
+            field[index][comp] = src[at + element * width + comp]
 
 
 def _strides(shape, width):

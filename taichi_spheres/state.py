@@ -90,8 +90,8 @@ class Features:
 
     @property
     def wall_bits(self) -> int:
-        """Bit a set for each axis a with walls (loops over the walls that take the axis
-        at run time: walls.py, contacts/rows.py)."""
+        """Bit a set for each axis a with walls (a loop over the walls that takes the
+        axis at run time: contacts/rows.py consider_walls)."""
         return sum(1 << a for a, w in enumerate(self.wall_axes) if w)
 
     def describe(self, shock: bool = False) -> list:
@@ -252,18 +252,18 @@ class SphereState:
     def bind_uniform(self, scene: Scene):
         """n_spheres = scene.n; r0, m0 [m, kg]: the radius and mass of the scene's first
         sphere (those of every sphere where they are equal), and their inverses
-        (set_uniform)."""
+        (set_count_and_inverses)."""
         self.host_load.write(self, r0=float(scene.radius[0]), m0=float(scene.mass[0]))
-        self.set_uniform(scene.n)
+        self.set_count_and_inverses(scene.n)
 
     @staticmethod
     def loaded_fields() -> tuple:
         """The fields bind loads (hostload.FieldLoad; n_spheres, which a take-out
-        changes in a kernel, is set_uniform's)."""
+        changes in a kernel, is set_count_and_inverses')."""
         return ("r0", "m0")
 
     @ti.kernel
-    def set_uniform(self, n: ti.i32):
+    def set_count_and_inverses(self, n: ti.i32):
         """n_spheres = n; inv_m0 = 1/m0 and inv_i0 = 1/I(m0, r0), in the fields'
         precision, as a row update would divide them (same bits)."""
         self.n_spheres[None] = n

@@ -60,3 +60,21 @@ def test_unknown_fields_and_wrong_sizes_are_refused(arch):
         load.write(part, b=1.0)
     with pytest.raises(ValueError, match="field 'v' takes 3 values, got 2"):
         load.write(part, v=[1.0, 2.0])
+
+
+def test_no_kernel_writes_a_field_the_engine_loads_from_the_host(arch):
+    """FieldLoad writes every field of its set from the host's copy on each write, so no
+    kernel may change one: after steps of a scene with walls, gravity, friction,
+    geometry objects and a sink, every loaded field still holds its host copy."""
+    import os
+    import taichi_spheres as ts
+    scene = ts.load_scene(os.path.join(os.path.dirname(__file__), "..", "scenes", "silo.toml"))
+    sim = ts.Simulation(scene, arch=arch)
+    sim.advance(0.05)
+    load = sim._engine.host_load
+    checked = 0
+    for (part, name), field, host in load.host_values():
+        assert field.to_numpy().tobytes() == host.astype(field.to_numpy().dtype).tobytes(), \
+            f"{part}.{name}"
+        checked += 1
+    assert checked >= 40 and sim.stats["steps"] > 0

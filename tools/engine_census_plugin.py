@@ -49,23 +49,27 @@ def log_kernel_compiles() -> dict:
     seconds per kernel name: {name: [AST seconds, first-launch seconds, instances]}."""
     from taichi.lang import kernel_impl
     seconds = collections.defaultdict(lambda: [0.0, 0.0, 0])   # ast, first launch, instances
-    launched = set()
+    # the compiled instances not launched yet (alive until then: their ids are unique;
+    # a re-initialised Taichi frees the older ones, whose ids may come again)
+    pending = set()
     materialize, launch = kernel_impl.Kernel.materialize, kernel_impl.Kernel.launch_kernel
 
     def timed_materialize(self, key=None, args=None, arg_features=None):
-        before = len(self.compiled_kernels)
+        before = set(map(id, self.compiled_kernels.values()))
         t0 = time.perf_counter()
         out = materialize(self, key, args, arg_features)
-        if len(self.compiled_kernels) > before:
+        new = set(map(id, self.compiled_kernels.values())) - before
+        if new:
             row = seconds[self.func.__name__]
             row[0] += time.perf_counter() - t0
-            row[2] += 1
+            row[2] += len(new)
+            pending.update(new)
         return out
 
     def timed_launch(self, t_kernel, *args):
-        if id(t_kernel) in launched:
+        if id(t_kernel) not in pending:
             return launch(self, t_kernel, *args)
-        launched.add(id(t_kernel))
+        pending.discard(id(t_kernel))
         t0 = time.perf_counter()
         out = launch(self, t_kernel, *args)
         seconds[self.func.__name__][1] += time.perf_counter() - t0

@@ -61,6 +61,14 @@ def first_step(tree: str, scene: str, mode: str) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def labelled(rev: str) -> str:
+    """``rev`` with its short commit hash where it names one by another name (HEAD)."""
+    out = subprocess.run(["git", "-C", HERE, "rev-parse", "--short", rev],
+                         capture_output=True, text=True)
+    short = out.stdout.strip()
+    return rev if not short or rev.startswith(short) else f"{rev} ({short})"
+
+
 def medians(runs: list) -> dict:
     """The median wall seconds and per-kernel seconds of ``runs``."""
     names = {name for run in runs for name in run["kernels"]}
@@ -71,7 +79,7 @@ def medians(runs: list) -> dict:
 
 def table(revs, scene, mode, results, top) -> list:
     """Markdown rows of one scene and mode: the first step, all kernels, then the
-    ``top`` kernels the first revision compiled longest."""
+    ``top`` kernels that took longest in either revision."""
     a, b = (results[rev] for rev in revs)
     rows = [f"| {scene} | {mode} | first step (build + advance) | {a['wall']:.2f} | "
             f"{b['wall']:.2f} | {b['wall'] / a['wall']:.2f} |",
@@ -99,6 +107,7 @@ def main(argv=None):
                     help="write the result into docs/bench.md ('kernel-compiles')")
     args = ap.parse_args(argv)
     revs = (args.rev_a, args.rev_b)
+    shown = {rev: labelled(rev) for rev in revs}
     lines = []
     with worktrees(*revs) as trees:
         for scene in args.scenes:
@@ -121,7 +130,7 @@ and advance it by one step bound; median of {args.repeats} runs per revision, al
 Kernel seconds: the AST pass and the first launch (LLVM's compile and one run) of each
 kernel, summed over its instances (tools/engine_census_plugin.py).
 
-| scene | compile mode | what | {revs[0]} [s] | {revs[1]} [s] | ratio |
+| scene | compile mode | what | {shown[revs[0]]} [s] | {shown[revs[1]]} [s] | ratio |
 |---|---|---|---|---|---|
 """ + "\n".join(lines) + "\n"
     publish(text, "kernel-compiles", args.write)

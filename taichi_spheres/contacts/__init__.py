@@ -97,7 +97,7 @@ class Contacts(PairRule, Detection, NearLists, ColourSweeps):
         self.cell_pairs = ti.Vector.field(2, ti.i32, shape=(cells, self.perf.recorded_pairs))
         # stencils as small tables walked by runtime loops (unrolling them multiplies
         # compile time)
-        # (both written by bind)
+        # (both loaded by bind_scalars)
         self.fwd_rows = ti.Vector.field(4, ti.i32, shape=len(FORWARD_ROWS))
         self.block = ti.Vector.field(3, ti.i32, shape=(len(BLOCK_PAIRS), 2))
         self.colours = ()

@@ -147,8 +147,8 @@ class ColourSweeps:
         (order inside a colour is thread-dependent and irrelevant: its blocks are
         disjoint). Call at kernel top level (or where everything runs serially, as in
         the fused step)."""
-        # (the zeroing and the prefix sum as serial runtime loops: unrolled, their 28
-        # steps were over a quarter of the field accesses sweep_serial compiled)
+        # (the zeroing and the prefix sum as serial runtime loops: unrolled, their 55
+        # statements were over a quarter of the field accesses sweep_serial compiled)
         ti.loop_config(serialize=True)
         for c in range(MAX_COLOURS + 1):
             self.colour_start[c] = 0

@@ -56,30 +56,30 @@ class WarmTable:
 
     def _warm_arrays(self, n: int) -> dict:
         """Host arrays for the table of n spheres in the fields' types: key, lam, kept,
-        flags (loaded, near), h (h_prev), t and r (warm_t, warm_r: (1, 1, 3) where the
-        solver has none)."""
+        flags (loaded, near), h (h_prev), and t and r (warm_t, warm_r; a (1, 1, 3)
+        placeholder where the solver has no such field)."""
         real = np.float64 if self.real == ti.f64 else np.float32
         slots = self.warm_key.shape[1]
-        vector = {name: (n if getattr(self, "warm_" + name) is not None else 1)
-                  for name in ("t", "r")}
-        return dict(key=np.zeros((n, slots), np.int32), lam=np.zeros((n, slots), real),
-                    kept=np.zeros(n, np.int32), flags=np.zeros((n, 2), np.int32),
-                    h=np.zeros(1, real),
-                    **{name: np.zeros((rows, slots if rows == n else 1, 3), real)
-                       for name, rows in vector.items()})
+        arrays = dict(key=np.zeros((n, slots), np.int32), lam=np.zeros((n, slots), real),
+                      kept=np.zeros(n, np.int32), flags=np.zeros((n, 2), np.int32),
+                      h=np.zeros(1, real))
+        for name in ("t", "r"):
+            held = getattr(self, "warm_" + name) is not None
+            arrays[name] = np.zeros((n, slots, 3) if held else (1, 1, 3), real)
+        return arrays
 
     def warm_rows(self, n: int) -> dict:
         """The warm-start table of the first n spheres (numpy copies) and h_prev [s]
         (one launch)."""
-        a = self._warm_arrays(n)
-        self._read_warm(n, a["key"], a["lam"], a["kept"], a["flags"], a["h"], a["t"], a["r"])
-        out = dict(key=a["key"], lam=a["lam"], kept=a["kept"], loaded=a["flags"][:, 0].copy(),
-                   h_prev=float(a["h"][0]))
+        arrays = self._warm_arrays(n)
+        self._read_warm(n, *(arrays[k] for k in ("key", "lam", "kept", "flags", "h", "t", "r")))
+        out = dict(key=arrays["key"], lam=arrays["lam"], kept=arrays["kept"],
+                   loaded=arrays["flags"][:, 0].copy(), h_prev=float(arrays["h"][0]))
         if self.rules.substeps:
-            out["near"] = a["flags"][:, 1].copy()
+            out["near"] = arrays["flags"][:, 1].copy()
         for name in ("t", "r"):
             if getattr(self, "warm_" + name) is not None:
-                out["warm_" + name] = a[name]
+                out["warm_" + name] = arrays[name]
         return out
 
     def load_warm(self, warm: dict) -> None:
@@ -87,18 +87,20 @@ class WarmTable:
         first rows (one launch; a table without "near" marks every sphere near, one
         without warm_t or warm_r leaves those fields as they are)."""
         n = len(warm["kept"])
-        a = self._warm_arrays(n)
-        a["key"][:], a["lam"][:], a["kept"][:] = warm["key"], warm["lam"], warm["kept"]
-        a["flags"][:, 0] = warm["loaded"]
-        a["flags"][:, 1] = warm["near"] if "near" in warm else 1
-        a["h"][0] = warm["h_prev"]
-        has = {}
+        arrays = self._warm_arrays(n)
+        arrays["key"][:], arrays["lam"][:], arrays["kept"][:] = (warm["key"], warm["lam"],
+                                                                 warm["kept"])
+        arrays["flags"][:, 0] = warm["loaded"]
+        arrays["flags"][:, 1] = warm["near"] if "near" in warm else 1
+        arrays["h"][0] = warm["h_prev"]
+        loads = {}
         for name in ("t", "r"):
-            has[name] = int(getattr(self, "warm_" + name) is not None and "warm_" + name in warm)
-            if has[name]:
-                a[name][:] = warm["warm_" + name]
-        self._write_warm(n, a["key"], a["lam"], a["kept"], a["flags"], a["h"], a["t"], a["r"],
-                         has["t"], has["r"])
+            loads[name] = int(getattr(self, "warm_" + name) is not None
+                              and "warm_" + name in warm)
+            if loads[name]:
+                arrays[name][:] = warm["warm_" + name]
+        self._write_warm(n, *(arrays[k] for k in ("key", "lam", "kept", "flags", "h", "t", "r")),
+                         loads["t"], loads["r"])
 
     @ti.kernel
     def _read_warm(self, n: ti.i32, key: ti.types.ndarray(dtype=ti.i32, ndim=2),
