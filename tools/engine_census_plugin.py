@@ -41,6 +41,7 @@ def pytest_configure(config):
                                       cells=cell_capacity)) + "\n")
 
     engine.Engine.__init__ = logged
+    config._kernel_seconds = log_kernel_compiles()
 
 
 def log_kernel_compiles() -> dict:
@@ -80,15 +81,10 @@ def log_kernel_compiles() -> dict:
     return seconds
 
 
-def pytest_sessionstart(session):
+def pytest_unconfigure(config):
+    """Write the kernel compile seconds (``<worker>.kernels.json``)."""
     out_dir = os.environ.get(CENSUS_ENV)
-    if out_dir:
-        session.config._kernel_seconds = log_kernel_compiles()
-
-
-def pytest_sessionfinish(session):
-    out_dir = os.environ.get(CENSUS_ENV)
-    seconds = getattr(session.config, "_kernel_seconds", None)
+    seconds = getattr(config, "_kernel_seconds", None)
     if out_dir and seconds:
         name = os.environ.get("PYTEST_XDIST_WORKER", "main") + ".kernels.json"
         with open(os.path.join(out_dir, name), "w", encoding="utf-8") as out:
