@@ -88,12 +88,6 @@ class Features:
     def periodic(self) -> bool:
         return not all(self.wall_axes)
 
-    @property
-    def wall_bits(self) -> int:
-        """Bit a set for each axis a with walls (a loop over the walls that takes the
-        axis at run time: contacts/rows.py consider_walls)."""
-        return sum(1 << a for a, w in enumerate(self.wall_axes) if w)
-
     def describe(self, shock: bool = False) -> list:
         """Human-readable list of what is compiled in and out (``shock``: the contact
         solver's shock propagation pass, contacts/shock.py ``shock_compiled``)."""

@@ -68,28 +68,26 @@ class ContactRows:
         """Rows for sphere i (cell k) and the walls closer than the margin, unless it
         moves into one at or above that wall's impact speed (walls.Motion
         .wall_impact_speed: 0 for side walls and ceilings under gravity)."""
-        # every wall in one runtime loop, lo then hi of each axis (the rows' order): one
-        # inlined copy. Under gravity every axis takes its component of it: on an axis
-        # without, acc = 0 (or -0) is not negative, as the constant 0 was not.
-        for wall in range(6):
-            a = wall // 2
-            if (ti.static(self.f.wall_bits) >> a) & 1 == 1:
+        for a in ti.static(range(3)):
+            if ti.static(self.f.wall_axes[a]):
                 g_a = ti.cast(0, self.real)
-                if ti.static(self.f.gravity):
+                if ti.static(self.f.gravity_axes[a]):
                     g_a = self.params.gravity[None][a]
-                gap = xi[a] - self.params.lo[None][a] - ri
-                into = -vi[a]
-                acc = g_a
-                if wall % 2 == 1:
-                    gap = self.params.hi[None][a] - xi[a] - ri
-                    into = vi[a]
-                    acc = -g_a
-                if gap < self.margin[None]:
-                    # with substeps impacts to come get rows too (inert_impact_row)
-                    if ti.static(self.rules.substeps) or gap < 0 or \
-                            into <= self.pairs.motion.wall_impact_speed(i, acc):
-                        self.record(k, i, -1 - wall, how)
+                lo_gap = xi[a] - self.params.lo[None][a] - ri
+                hi_gap = self.params.hi[None][a] - xi[a] - ri
+                lo_imp = self.pairs.motion.wall_impact_speed(i, g_a)
+                hi_imp = self.pairs.motion.wall_impact_speed(i, -g_a)
+                # with substeps impacts to come get rows too (inert_impact_row)
+                sub = ti.static(self.rules.substeps)
+                if lo_gap < self.margin[None]:
+                    if sub or lo_gap < 0 or -vi[a] <= lo_imp:
+                        self.record(k, i, -1 - 2 * a, how)
                     else:       # its overlap after the solve: overlaps.py
+                        self.unrowed[i] = 1
+                if hi_gap < self.margin[None]:
+                    if sub or hi_gap < 0 or vi[a] <= hi_imp:
+                        self.record(k, i, -2 - 2 * a, how)
+                    else:
                         self.unrowed[i] = 1
 
     @ti.func
@@ -213,12 +211,11 @@ class ContactRows:
         """(normal, gap [m], effective mass [kg]) of row s at the current positions."""
         a = self.row_a[s]
         b = self.row_b[s]
-        xa = self.state.x[a]
         n = ti.Vector.zero(self.real, 3)
         gap = ti.cast(0, self.real)
         meff = 1 / self.inv_mass(a)
         if b >= 0:
-            d = self.pairs.min_image(xa - self.state.x[b])
+            d = self.pairs.min_image(self.state.x[a] - self.state.x[b])
             dist = d.norm()
             n[2] = 1       # centres that met (a pair crushed into one point): a fixed axis
             if dist > 0:
@@ -229,19 +226,21 @@ class ContactRows:
             wall = -1 - b
             r = self.state.rad(a)
             if wall < GEOMETRY_ROWS:
-                # the wall of axis wall // 2 at its lo (wall even) or hi side, indexed at
-                # run time: one inlined copy, not one per axis and side
-                ax = wall // 2
-                if wall % 2 == 0:
-                    n[ax] = 1
-                    gap = xa[ax] - self.params.lo[None][ax] - r
-                else:
-                    n[ax] = -1
-                    gap = self.params.hi[None][ax] - xa[ax] - r
+                side = wall % 2
+                for ax in ti.static(range(3)):
+                    if ti.static(self.f.wall_axes[ax]):
+                        if wall // 2 == ax:
+                            if side == 0:
+                                n[ax] = 1
+                                gap = self.state.x[a][ax] - self.params.lo[None][ax] - r
+                            else:
+                                n[ax] = -1
+                                gap = self.params.hi[None][ax] - self.state.x[a][ax] - r
             # (scenes without objects have no object rows: their code is compiled out)
             if ti.static(self.f.geometry):
                 if wall >= GEOMETRY_ROWS:
-                    gap, n = self.pairs.motion.surface_gap(wall - GEOMETRY_ROWS, xa, r)
+                    gap, n = self.pairs.motion.surface_gap(wall - GEOMETRY_ROWS,
+                                                           self.state.x[a], r)
         return n, gap, meff
 
     @ti.func
