@@ -59,7 +59,6 @@ FORWARD_ROWS = ((0, 0, 0, 1), (0, 1, -1, 1), (1, -1, -1, 1), (1, 0, -1, 1), (1, 
 ALL_ROWS = tuple((dx, dy, -1, 1) for dx in (-1, 0, 1) for dy in (-1, 0, 1))
 
 
-
 @dataclasses.dataclass(frozen=True)
 class GridGeometry:
     """Cell layout of the box (pure Python, no Taichi).

@@ -17,16 +17,14 @@ __all__ = ["FieldLoad"]
 
 
 def _layout(field):
-    """(is_int, shape, width, size) of a field: its index shape, the vector width
-    (0 for a scalar field) and the values it holds."""
+    """(is_int, shape, width) of a field: whether it holds i32, its index shape and the
+    vector width (0 for a scalar field)."""
     width = 0
     if isinstance(field, MatrixField):
         if field.m != 1:
             raise TypeError(f"FieldLoad takes scalar and vector fields, not {field.n}x{field.m}")
         width = field.n
-    is_int = field.dtype == ti.i32
-    shape = tuple(field.shape)
-    return is_int, shape, width, math.prod(shape) * max(width, 1)
+    return field.dtype == ti.i32, tuple(field.shape), width
 
 
 class FieldLoad:
@@ -40,22 +38,22 @@ class FieldLoad:
 
     def __init__(self, parts, real):
         self.np_real = np.float64 if real == ti.f64 else np.float32
-        fields, layout, offsets, self.where = [], [], [], {}
-        sizes = [0, 0]      # reals, ints
+        fields, layout, offsets = [], [], []
+        self.index = {}     # (id(part), name): the field's place in fields
         self.names = []     # (part's class, field name) of each field, in order
+        sizes = [0, 0]      # reals, ints
         for part in parts:
             for name in part.loaded_fields():
                 field = getattr(part, name)
-                is_int, shape, width, size = _layout(field)
-                if not is_int and field.dtype != real:
+                kind = _layout(field)
+                if not kind[0] and field.dtype != real:
                     raise TypeError(f"field {name!r} holds {field.dtype}, not {real} or i32")
-                kind = int(is_int)
-                self.where[(id(part), name)] = (is_int, sizes[kind], size)
+                self.index[(id(part), name)] = len(fields)
                 self.names.append((type(part).__name__, name))
                 fields.append(field)
-                layout.append((is_int, shape, width))
-                offsets.append(sizes[kind])
-                sizes[kind] += size
+                layout.append(kind)
+                offsets.append(sizes[kind[0]])
+                sizes[kind[0]] += _size(kind)
         self.reals = np.zeros(max(sizes[0], 1), dtype=self.np_real)
         self.ints = np.zeros(max(sizes[1], 1), dtype=np.int32)
         self.fields, self.layout, self.offsets = tuple(fields), tuple(layout), tuple(offsets)
@@ -76,10 +74,10 @@ class FieldLoad:
         array of the field's shape, x its vector width, for the others) and write
         every field of the set."""
         for name, value in values.items():
-            key = (id(part), name)
-            if key not in self.where:
+            k = self.index.get((id(part), name))
+            if k is None:
                 raise KeyError(f"{type(part).__name__}.{name} is not a loaded field")
-            is_int, at, size = self.where[key]
+            is_int, at, size = self.layout[k][0], self.offsets[k], _size(self.layout[k])
             flat = np.asarray(value, dtype=np.int64 if is_int else np.float64).reshape(-1)
             if flat.size != size:
                 raise ValueError(f"field {name!r} takes {size} values, got {flat.size}")
@@ -126,10 +124,10 @@ def _size(layout):
 
 
 def _stores(k, layout, at):
-    """The stores of 0-d field k: (k, None, component (-1 for a scalar field), is_int,
+    """The stores of 0-d field k: (k, component (-1 for a scalar field), is_int,
     position in its host array)."""
     is_int, _, width = layout
-    return [(k, None, comp, is_int, at + max(comp, 0)) for comp in
+    return [(k, comp, is_int, at + max(comp, 0)) for comp in
             (range(width) if width else [-1])]
 
 
@@ -137,7 +135,7 @@ def _stores(k, layout, at):
 def _store(field: ti.template(), store: ti.template(), reals: ti.template(),
            ints: ti.template()):
     """One value from ``ints`` (an i32 field) or ``reals`` into 0-d ``field`` (_stores)."""
-    comp, is_int, at = ti.static(store[2], store[3], store[4])
+    comp, is_int, at = ti.static(store[1], store[2], store[3])
     src = ti.static(ints if is_int else reals)
     if ti.static(comp < 0):
         field[None] = src[at]
@@ -152,7 +150,7 @@ def _store_element(field: ti.template(), layout: ti.template(), at: ti.template(
     from position at + element x width of ``ints`` (an i32 field) or ``reals``."""
     is_int, shape, width = ti.static(layout)
     src = ti.static(ints if is_int else reals)
-    strides = ti.static(_strides(shape, 0))
+    strides = ti.static(_strides(shape))
     rest = element
     index = ti.Vector.zero(ti.i32, ti.static(len(shape)))
     for d in ti.static(range(len(shape))):
@@ -165,6 +163,6 @@ def _store_element(field: ti.template(), layout: ti.template(), at: ti.template(
             field[index][comp] = src[at + element * width + comp]
 
 
-def _strides(shape, width):
-    """Row-major strides of a field of ``shape`` with ``width`` components a value."""
-    return tuple(math.prod(shape[d + 1:]) * max(width, 1) for d in range(len(shape)))
+def _strides(shape):
+    """Row-major strides of the elements of a field of ``shape``."""
+    return tuple(math.prod(shape[d + 1:]) for d in range(len(shape)))
