@@ -1,5 +1,5 @@
 """The energy-, overlap- and rate-measuring tools (tools/warm_start_energy.py,
-tools/bed_energy.py, tools/step_overlaps.py, tools/silo_seeds.py,
+tools/bed_energy.py, tools/bed_rest.py, tools/step_overlaps.py, tools/silo_seeds.py,
 tools/solver_convergence.py): bad options are usage errors before any run, their
 tables say what was measured, and their arithmetic holds on cases with known answers.
 No timings or measured values are asserted (the tools are the measurement)."""
@@ -14,6 +14,7 @@ import pytest
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
 
 import bed_energy  # noqa: E402  (tools/bed_energy.py)
+import bed_rest  # noqa: E402  (tools/bed_rest.py)
 import bed_steps  # noqa: E402  (tools/bed_steps.py)
 import silo_seeds  # noqa: E402  (tools/silo_seeds.py)
 import row_activity  # noqa: E402  (tools/row_activity.py)
@@ -54,7 +55,11 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (silo_seeds, ["--variants", "=--substeps"], "a variant is NAME=OPTIONS"),
     (silo_seeds, ["--variants", "LAMMPS=--substeps"], "NAME not LAMMPS"),
     (silo_seeds, ["--variants", "fine=--step-fractions 0.05"],
-     "variant 'fine': options tools/silo.py does not take")])
+     "variant 'fine': options tools/silo.py does not take"),
+    (bed_rest, ["--until", "2"], "--until must be at least 3 s"),
+    (bed_rest, ["--every", "0.3"], "--every must divide 1 s and --until"),
+    (bed_rest, ["--until", "4.5", "--every", "1"], "--every must divide 1 s and --until"),
+    (bed_rest, ["--fills", "-1"], "--fills must be >= 0")])
 def test_tools_refuse_bad_options(tool, argv, words, capsys):
     with pytest.raises(SystemExit) as exit_info:
         tool.main(argv)
@@ -69,6 +74,37 @@ def test_warm_start_energy_table_has_a_row_per_case():
     assert "| 100 | 0.5 | off | 9.7e-02 | 34 | 0 |" in text
     assert "| 100 | 0.5 | on | 1.7e-04 | 49 | 36 |" in text
     assert "next 300 steps" in text
+
+
+def test_bed_rest_finds_when_the_energy_stays_below_the_target():
+    times = bed_rest.sample_times(3.0, 0.5)
+    assert list(times) == [0.5, 1.0, 1.5, 2.0, 2.5, 3.0]
+    assert bed_rest.settled_from([1e-3, 1e-5, 1e-7, 2e-6, 1e-7, 1e-8], times) == "2.5"
+    assert bed_rest.settled_from([1e-7] * 6, times) == "0.5"
+    assert bed_rest.settled_from([1e-7] * 5 + [2e-6], times) == "not by 3"
+    assert bed_rest.whole_seconds(times) == [3, 5]
+    assert [bed_rest.last_second(t, times) for t in times] == [False] * 3 + [True] + [False] * 2
+
+
+def test_bed_rest_motion_is_per_diameter_and_the_table_says_so():
+    x0 = np.zeros((4, 3))
+    x1 = np.array([[0.0, 0, 0], [0.01, 0, 0], [0, 0.02, 0], [0, 0, 0.04]])
+    v = np.array([[0.0, 0, 0], [3e-3, 0, 0], [0, 4e-3, 0], [0, 0, 0]])
+    m = bed_rest.motion(x0, x1, v, np.full(4, 0.02))
+    assert m["median"] == pytest.approx(0.75) and m["largest"] == pytest.approx(2.0)
+    assert m["rms_speed"] == pytest.approx(np.sqrt((9e-6 + 16e-6) / 4))
+    times = bed_rest.sample_times(3.0, 1.0)
+    run = dict(kinetic=[1e-3, 2e-6, 5e-7], wall=0.8, motion=m)
+    args = argparse.Namespace(every=1.0, write=False)
+    text = bed_rest.report(args, times, {"defaults": run, "LAMMPS": dict(run, wall=None)},
+                           [run, dict(run, kinetic=[1e-3, 5e-7, 4e-7])], "run now")
+    assert "| defaults | 2.0e-06 | 5.0e-07 | 3 | 7.5e-01 |" in text
+    assert "| LAMMPS | 2.0e-06 | 5.0e-07 | 3 |" in text and text.count("| - |") == 1
+    assert "2 fills: median (largest) | 1.2e-06 (2.0e-06) | 4.5e-07 (5.0e-07) | " \
+        "fills at most 1e-6 at each: 1, 2 |" in text
+    table = bed_rest.accuracy_table({100: dict(motion=m, sweeps=100.0, wall=0.6),
+                                     300: dict(motion=m, sweeps=290.4, wall=1.5)}, 3.0)
+    assert "| 100 (default) | 100 | 7.5e-01 |" in table and "| 300 | 290 |" in table
 
 
 def test_bed_energy_table_quotes_lammps_from_its_stored_run():

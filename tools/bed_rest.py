@@ -1,0 +1,329 @@
+#!/usr/bin/env python3
+"""Does the pour's bed come to rest? Its kinetic energy against time up to --until s,
+and how far its spheres still move in the last second, in taichi_spheres and LAMMPS.
+
+scenes/pour.toml (2,000 spheres, e = 0.5, poured into a box) runs from t = 0 on one
+thread, f64, with the run stopped every --every s to sample it (each stop shortens the
+step before it, so the trajectory is that of a run with those stops). Runs:
+
+- taichi_spheres, frictionless (the scene), at the defaults;
+- the same with 1,000 velocity and 1,000 position sweeps at most per step (a solve far
+  closer to the converged one: docs/bench.md, "solver-convergence");
+- the same at the defaults with friction mu = 0.5 between spheres and on the walls;
+- LAMMPS GRANULAR, frictionless Hertz as in tools/peer_lammps.py (E = 5e9 Pa,
+  nu = 0.3, dt = 5e-6 s), the same initial state; its run is saved to --lammps-json
+  and reused on the same CPU model with the same settings (~7 min on one core);
+- over --fills fills (the pour's ``seed`` 1..K), taichi_spheres at the defaults;
+- from the first run's state at until - 1 s, its last second again with solves of
+  increasing accuracy (velocity sweeps at most: CAPS, position sweeps 1,000): how the
+  motion of a bed that has stopped rearranging depends on how close the solve is to
+  the converged one.
+
+Reported per run: the kinetic energy (spin included) over the initial energy at 2 s
+and each whole second after, the last sample above 1e-6 of it (and so the time from
+which every sample is at most 1e-6), and, over the last second [until - 1, until],
+the median, 99th percentile and largest displacement of a sphere / its diameter and
+the rms speed at the end [m/s]; for taichi_spheres also the wall seconds per
+simulated second from 1 s on.
+
+    python tools/bed_rest.py --write              # ~12 min (LAMMPS ~7 of them)
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.join(HERE, "..")
+sys.path.insert(0, ROOT)
+sys.path.insert(0, HERE)
+
+import taichi_spheres as ts  # noqa: E402
+from taichi_spheres.config import Tuning  # noqa: E402
+from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
+from bed_steps import pour_fill  # noqa: E402
+import peer_lammps  # noqa: E402
+
+SCENE = os.path.join("scenes", "pour.toml")
+#: the threshold of issue targets: kinetic energy / initial energy
+K_TARGET = 1e-6
+#: LAMMPS model and step, as tools/peer_lammps.py's defaults
+YOUNG, POISSON, DT = 5e9, 0.3, 5e-6
+#: velocity sweep caps of the accuracy rows (the first: the defaults)
+CAPS = (100, 300, 1000, 3000)
+DEFAULT_CAP = Tuning().physics.contact_iterations
+#: taichi_spheres runs: label -> (Tuning changes, friction mu or None)
+RUNS = {
+    "taichi_spheres, frictionless, defaults": ({}, None),
+    "taichi_spheres, frictionless, 1000 / 1000 sweeps":
+        (dict(contact_iterations=1000, position_iterations=1000), None),
+    "taichi_spheres, friction 0.5, defaults": ({}, 0.5),
+}
+
+
+def whole_multiple(value: float, step: float) -> bool:
+    """True when value / step is a whole number (to 1e-9)."""
+    ratio = value / step
+    return abs(ratio - round(ratio)) < 1e-9
+
+
+def check_sampling(args, ap) -> None:
+    """Usage errors: --until below 3 s, --every not > 0 or not dividing 1 s, --until
+    not a multiple of --every, --fills below 0."""
+    if args.until < 3.0:
+        ap.error(f"--until must be at least 3 s, got {args.until:g}")
+    if not (args.every > 0 and whole_multiple(1.0, args.every)
+            and whole_multiple(args.until, args.every)):
+        ap.error(f"--every must divide 1 s and --until, got {args.every:g}")
+    if args.fills < 0:
+        ap.error(f"--fills must be >= 0, got {args.fills}")
+
+
+def sample_times(until: float, every: float) -> np.ndarray:
+    """The sampling instants every..until [s]."""
+    return np.round(np.arange(1, int(round(until / every)) + 1) * every, 9)
+
+
+def last_second(t: float, times) -> bool:
+    """True at the sample that starts the last second, until - 1 [s]."""
+    return abs(t - (times[-1] - 1.0)) < 1e-9
+
+
+def motion(x_start, x_end, v_end, diameter) -> dict:
+    """Displacements / diameter over a window (median, p99, largest) and the rms speed
+    at its end [m/s]; x (N, 3) [m] in the same sphere order, diameter (N,) [m]."""
+    d = np.linalg.norm(x_end - x_start, axis=1) / diameter
+    return dict(median=float(np.median(d)), p99=float(np.percentile(d, 99)),
+                largest=float(d.max()),
+                rms_speed=float(np.sqrt((np.asarray(v_end) ** 2).sum(axis=1).mean())))
+
+
+def compiled_simulation(scene, tuning: dict, start=None):
+    """A 1-thread Simulation under ``tuning`` at ``start`` (a checkpoint; None: t = 0),
+    its step's kernels compiled (or loaded) by one untimed step taken back."""
+    sim = ts.Simulation(scene, threads=1, tuning=Tuning().with_(**tuning))
+    if start is None:
+        start = sim.checkpoint()
+    else:
+        sim.restore(start)
+    sim.advance(sim.max_step())
+    sim.restore(start)
+    return sim
+
+
+def run_taichi(scene, times, tuning: dict) -> dict:
+    """Kinetic energy / initial energy at ``times``, motion() over the last second,
+    wall s per simulated s from 1 s on (the first step's compile excluded), and the
+    checkpoint at the start of the last second (``last``)."""
+    sim = compiled_simulation(scene, tuning)
+    e0, kinetic, wall, x_last = sim.initial_energy, [], 0.0, None
+    for t in times:
+        t0 = time.perf_counter()
+        sim.advance_to(float(t))
+        wall += (time.perf_counter() - t0) if t > 1.0 + 1e-9 else 0.0
+        st = sim.state()
+        kinetic.append((ts.observe.kinetic_energy(st) + ts.observe.rotational_energy(st)) / e0)
+        if last_second(t, times):
+            x_last, last = st.x.copy(), sim.checkpoint()
+    st = sim.state()
+    return dict(kinetic=kinetic, wall=wall / (times[-1] - 1.0),
+                motion=motion(x_last, st.x, st.v, 2 * st.radius), last=last)
+
+
+def accuracy_row(scene, start, cap: int) -> dict:
+    """From checkpoint ``start``, 1 s more with at most ``cap`` velocity sweeps (1,000
+    position sweeps; the defaults' own 60 at the defaults' cap): motion(), velocity
+    sweeps per step, wall s per simulated s."""
+    tuning = {} if cap == DEFAULT_CAP else dict(contact_iterations=cap,
+                                               position_iterations=1000)
+    sim = compiled_simulation(scene, tuning, start)
+    x0, sweeps, steps = sim.state().x.copy(), sim.stats["contact_iterations"], sim.stats["steps"]
+    t0 = time.perf_counter()
+    sim.advance(1.0)
+    wall = time.perf_counter() - t0
+    st = sim.state()
+    return dict(motion=motion(x0, st.x, st.v, 2 * st.radius), wall=wall,
+                sweeps=(sim.stats["contact_iterations"] - sweeps) / max(
+                    sim.stats["steps"] - steps, 1))
+
+
+def lammps_by_id(lmp):
+    """LAMMPS positions, velocities [m, m/s], masses [kg] and radii [m], by atom id."""
+    nl = lmp.extract_global("nlocal")
+    order = np.argsort(np.array(lmp.numpy.extract_atom("id")[:nl]))
+    x, v, m = (a[order] for a in peer_lammps.lammps_state(lmp))
+    return x, v, m, np.array(lmp.numpy.extract_atom("radius")[:nl])[order]
+
+
+def run_lammps(scene, times) -> dict:
+    """As run_taichi for LAMMPS (no wall time): kinetic energy / initial energy at
+    ``times`` and motion() over the last second."""
+    lammps, why = peer_lammps.import_lammps()
+    if lammps is None:
+        raise SystemExit(f"LAMMPS: {why}")
+    lmp = peer_lammps.lammps_scene_setup(lammps, scene, 1, YOUNG, POISSON, DT)
+    lmp.command("run 0")
+    x, v, m, _ = lammps_by_id(lmp)
+    e0 = peer_lammps.energies(x, v, m, scene.gravity)[1]
+    kinetic, done, x_last = [], 0, None
+    for t in times:
+        steps = int(round(t / DT)) - done
+        lmp.command(f"run {steps} pre no post no")
+        done += steps
+        x, v, m, r = lammps_by_id(lmp)
+        kinetic.append(peer_lammps.energies(x, v, m, scene.gravity)[0] / e0)
+        if last_second(t, times):
+            x_last = x.copy()
+        print(f"LAMMPS t = {t:g} s: K / E0 = {kinetic[-1]:.2e}", flush=True)
+    lmp.close()
+    return dict(kinetic=kinetic, wall=None, motion=motion(x_last, x, v, 2 * r))
+
+
+def lammps_result(scene, times, path) -> tuple:
+    """LAMMPS's run: from ``path`` where it was saved on this CPU model for this
+    scene's initial state and sampling, else run (and saved to ``path`` if given);
+    returns (result, where it came from)."""
+    key = dict(digest=peer_lammps.scene_digest(scene), times=[float(t) for t in times],
+               young=YOUNG, poisson=POISSON, dt=DT, cpu=cpu_name())
+    if path and os.path.exists(path):
+        with open(path) as fh:
+            saved = json.load(fh)
+        if saved["key"] == key:
+            return saved["result"], f"saved {saved['date']} in {os.path.relpath(path, ROOT)}"
+    result = run_lammps(scene, times)
+    if path:
+        with open(path, "w") as fh:
+            json.dump(dict(key=key, result=result, date=datetime.date.today().isoformat()),
+                      fh, indent=1)
+    return result, "run now"
+
+
+def settled_from(kinetic, times) -> str:
+    """The first sampled time from which every sample is <= K_TARGET, as text."""
+    above = [t for t, k in zip(times, kinetic) if k > K_TARGET]
+    if not above:
+        return f"{times[0]:g}"
+    if above[-1] == times[-1]:
+        return f"not by {times[-1]:g}"
+    return f"{times[list(times).index(above[-1]) + 1]:g}"
+
+
+def fills_result(times, fills: int) -> list:
+    """run_taichi at the defaults for the pour's seed 1..fills."""
+    out = []
+    for seed in range(1, fills + 1):
+        out.append(run_taichi(pour_fill(seed), times, {}))
+        print(f"fill {seed}: K / E0 at the end {out[-1]['kinetic'][-1]:.2e}", flush=True)
+    return out
+
+
+def whole_seconds(times) -> list:
+    """Indices of the samples at 2 s and each whole second after."""
+    return [k for k, t in enumerate(times) if t >= 2.0 - 1e-9 and abs(t - round(t)) < 1e-9]
+
+
+def run_row(label, r, times) -> str:
+    """One run's table row."""
+    kin = " | ".join(f"{r['kinetic'][k]:.1e}" for k in whole_seconds(times))
+    m = r["motion"]
+    wall = "-" if r["wall"] is None else f"{r['wall']:.2f}"
+    return (f"| {label} | {kin} | {settled_from(r['kinetic'], times)} | {m['median']:.1e} | "
+            f"{m['p99']:.1e} | {m['largest']:.1e} | {m['rms_speed']:.1e} | {wall} |")
+
+
+def fills_row(rows, times) -> str:
+    """The fills' row: medians (and largest) over the fills."""
+    cells = []
+    for k in whole_seconds(times):
+        ks = [r["kinetic"][k] for r in rows]
+        cells.append(f"{np.median(ks):.1e} ({max(ks):.1e})")
+    at_most = [sum(r["kinetic"][k] <= K_TARGET for r in rows) for k in whole_seconds(times)]
+    med = {key: np.median([r["motion"][key] for r in rows])
+           for key in ("median", "p99", "largest", "rms_speed")}
+    walls = [r["wall"] for r in rows]
+    return (f"| taichi_spheres, frictionless, defaults, {len(rows)} fills: median (largest) | "
+            + " | ".join(cells) + " | fills at most 1e-6 at each: "
+            + ", ".join(str(a) for a in at_most)
+            + f" | {med['median']:.1e} | {med['p99']:.1e} | {med['largest']:.1e} | "
+            f"{med['rms_speed']:.1e} | {np.median(walls):.2f} |")
+
+
+def report(args, times, results, fills, source) -> str:
+    """The markdown section."""
+    until = times[-1]
+    heads = " | ".join(f"K / E0 at {times[k]:g} s" for k in whole_seconds(times))
+    lines = [f"{datetime.date.today()}, {cpu_name()}, 1 thread, f64: "
+             f"`python tools/bed_rest.py{' --write' if args.write else ''}`.", "",
+             f"`{SCENE}`, the run stopped every {args.every:g} s up to {until:g} s; K: kinetic "
+             "energy (spin included), E0: the initial energy. Motion over the last second "
+             f"[{until - 1:g}, {until:g}] s: displacement of a sphere / its diameter, rms "
+             f"speed at {until:g} s. LAMMPS (Hertz, frictionless, E = {YOUNG:g} Pa, "
+             f"nu = {POISSON}, dt = {DT:g} s): {source}.", "",
+             f"| run | {heads} | K / E0 at most 1e-6 from [s] | median displacement / d | "
+             "99th percentile | largest | rms speed [m/s] | wall s per simulated s after 1 s |",
+             "|---|" + "---|" * len(whole_seconds(times)) + "---|---|---|---|---|---|"]
+    lines += [run_row(label, r, times) for label, r in results.items()]
+    if fills:
+        lines.append(fills_row(fills, times))
+    return "\n".join(lines) + "\n"
+
+
+def accuracy_table(rows: dict, until: float) -> str:
+    """The accuracy rows' markdown."""
+    lines = ["", f"The first run's last second [{until - 1:g}, {until:g}] s again from its state "
+             f"at {until - 1:g} s, with solves closer to the converged one (position sweeps "
+             "1,000 at most where the velocity cap is not the default):", "",
+             "| velocity sweeps at most | velocity sweeps per step | median displacement / d | "
+             "99th percentile | largest | rms speed at the end [m/s] | wall s per simulated s |",
+             "|---|---|---|---|---|---|---|"]
+    for cap, r in rows.items():
+        m = r["motion"]
+        label = f"{cap} (default)" if cap == DEFAULT_CAP else f"{cap}"
+        lines.append(f"| {label} | {r['sweeps']:.0f} | {m['median']:.1e} | {m['p99']:.1e} | "
+                     f"{m['largest']:.1e} | {m['rms_speed']:.1e} | {r['wall']:.2f} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--until", type=float, default=5.0, help="end of the runs [s]")
+    ap.add_argument("--every", type=float, default=0.25, help="sampling interval [s]")
+    ap.add_argument("--fills", type=int, default=8, help="fills at the defaults (0: none)")
+    ap.add_argument("--lammps-json", default=os.path.join("docs", "bed_rest_lammps.json"))
+    ap.add_argument("--no-lammps", action="store_true")
+    ap.add_argument("--lammps-only", action="store_true",
+                    help="only run (or load) LAMMPS's run and save it to --lammps-json")
+    ap.add_argument("--write", action="store_true", help="write into docs/bench.md")
+    args = ap.parse_args(argv)
+    check_sampling(args, ap)
+    times = sample_times(args.until, args.every)
+    scene = ts.load_scene(os.path.join(ROOT, SCENE))
+    path = os.path.join(ROOT, args.lammps_json) if args.lammps_json else None
+    if args.lammps_only:
+        print(lammps_result(scene, times, path)[1])
+        return 0
+    results = {}
+    for label, (tuning, mu) in RUNS.items():
+        run_scene = scene if mu is None else scene.replace(friction=mu, wall_friction=None)
+        results[label] = run_taichi(run_scene, times, tuning)
+        print(label, results[label]["kinetic"], results[label]["motion"], flush=True)
+    start = results[next(iter(RUNS))]["last"]
+    accuracy = {cap: accuracy_row(scene, start, cap) for cap in CAPS}
+    fills = fills_result(times, args.fills)
+    source = "not run"
+    if not args.no_lammps:
+        results["LAMMPS, frictionless"], source = lammps_result(scene, times, path)
+    publish(report(args, times, results, fills, source) + accuracy_table(accuracy, times[-1]),
+            "bed-rest", args.write)
+    return 0
+
+
+if __name__ == "__main__":
+    peer_lammps.ensure_lib_path()
+    sys.exit(main())
