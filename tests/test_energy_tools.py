@@ -59,7 +59,12 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (bed_rest, ["--until", "2"], "--until must be at least 3 s"),
     (bed_rest, ["--every", "0.3"], "--every must divide 1 s and --until"),
     (bed_rest, ["--until", "4.5", "--every", "1"], "--every must divide 1 s and --until"),
-    (bed_rest, ["--fills", "-1"], "--fills must be >= 0")])
+    (bed_rest, ["--fills", "-1"], "--fills and --lammps-fills must be >= 0"),
+    (bed_rest, ["--lammps-fills", "-1"], "--fills and --lammps-fills must be >= 0"),
+    (bed_rest, ["--every", "0"], "--every must divide 1 s"),
+    (bed_rest, ["--until", "nan"], "--until must be at least 3 s"),
+    (bed_rest, ["--no-lammps", "--lammps-only"], "--no-lammps runs no LAMMPS"),
+    (bed_rest, ["--lammps-only", "--lammps-json", ""], "--lammps-only saves")])
 def test_tools_refuse_bad_options(tool, argv, words, capsys):
     with pytest.raises(SystemExit) as exit_info:
         tool.main(argv)
@@ -95,16 +100,59 @@ def test_bed_rest_motion_is_per_diameter_and_the_table_says_so():
     assert m["rms_speed"] == pytest.approx(np.sqrt((9e-6 + 16e-6) / 4))
     times = bed_rest.sample_times(3.0, 1.0)
     run = dict(kinetic=[1e-3, 2e-6, 5e-7], wall=0.8, motion=m)
-    args = argparse.Namespace(every=1.0, write=False)
+    args = argparse.Namespace(until=3.0, every=1.0, fills=2, lammps_fills=1, no_lammps=False,
+                              write=False)
     text = bed_rest.report(args, times, {"defaults": run, "LAMMPS": dict(run, wall=None)},
-                           [run, dict(run, kinetic=[1e-3, 5e-7, 4e-7])], "run now")
+                           {"taichi": [run, dict(run, kinetic=[1e-3, 5e-7, 4e-7])],
+                            "LAMMPS": [dict(run, wall=None)], "none": []}, "run now")
     assert "| defaults | 2.0e-06 | 5.0e-07 | 3 | 7.5e-01 |" in text
-    assert "| LAMMPS | 2.0e-06 | 5.0e-07 | 3 |" in text and text.count("| - |") == 1
-    assert "2 fills: median (largest) | 1.2e-06 (2.0e-06) | 4.5e-07 (5.0e-07) | " \
+    assert "| LAMMPS | 2.0e-06 | 5.0e-07 | 3 |" in text
+    assert "| taichi, 2 fills: median (largest) | 1.2e-06 (2.0e-06) | 4.5e-07 (5.0e-07) | " \
         "fills at most 1e-6 at each: 1, 2 |" in text
-    table = bed_rest.accuracy_table({100: dict(motion=m, sweeps=100.0, wall=0.6),
-                                     300: dict(motion=m, sweeps=290.4, wall=1.5)}, 3.0)
-    assert "| 100 (default) | 100 | 7.5e-01 |" in table and "| 300 | 290 |" in table
+    assert "| LAMMPS, 1 fills: median (largest) | 2.0e-06 (2.0e-06) |" in text
+    assert "none" not in text and text.count("| - |") == 2
+    assert "`python tools/bed_rest.py --until 3 --every 1 --fills 2 --lammps-fills 1`" in text
+    cap = bed_rest.DEFAULT_CAP
+    table = bed_rest.accuracy_table({cap: dict(motion=m, sweeps=float(cap), wall=0.6),
+                                     3 * cap: dict(motion=m, sweeps=2.904 * cap, wall=1.5)},
+                                    3.0, True)
+    assert f"| {cap} (default) | {cap} | 7.5e-01 |" in table
+    assert f"| {3 * cap} | {2.904 * cap:.0f} |" in table and "checked, the same" in table
+    assert "NOT the same" in bed_rest.accuracy_table({}, 3.0, False)
+    growth = bed_rest.growth_table({100: [1e-5, 1e-5, 2e-5, 4e-5], 300: [1e-5] * 4,
+                                    30: [0.0, 0.0, 1e-5]}, 300, 9e-6)
+    assert "| 100 | 1.0e-05 | 1.0e-05 | 2.0e-05 | 4.0e-05 | 2.00 |" in growth
+    assert "| 300 | 1.0e-05 | 1.0e-05 | 1.0e-05 | 1.0e-05 | 1.00 |" in growth
+    assert "| 30 | 0.0e+00 | 0.0e+00 | 1.0e-05 | - |" in growth and "9.0e-06 m/s" in growth
+
+
+def test_bed_rest_defaults_pass_its_checks_and_name_the_command():
+    args = argparse.Namespace(
+        until=5.0, every=0.25, fills=8, lammps_fills=None, no_lammps=False,
+        lammps_only=False, lammps_json="x.json", write=True)
+    bed_rest.check_sampling(args, None)          # would call ap.error on a bad option
+    assert bed_rest.command_text(args) == "python tools/bed_rest.py --write"
+    args.until, args.no_lammps, args.write = 6.0, True, False
+    assert bed_rest.command_text(args) == "python tools/bed_rest.py --until 6 --no-lammps"
+
+
+def test_bed_rest_keeps_each_lammps_run_once_and_reuses_it(tmp_path, monkeypatch):
+    runs = []
+    monkeypatch.setattr(bed_rest, "run_lammps", lambda scene, times: runs.append(1) or
+                        dict(kinetic=[len(runs)]))
+    scene = types.SimpleNamespace(x=np.zeros((2, 3)), v=np.zeros((2, 3)), radius=np.ones(2),
+                                  mass=np.ones(2), box_lo=np.zeros(3), box_hi=np.ones(3),
+                                  gravity=np.array([0, 0, -9.81]), restitution=0.5,
+                                  wall_restitution=0.5)
+    other = types.SimpleNamespace(**dict(vars(scene), restitution=0.9))
+    path = str(tmp_path / "runs.json")
+    times = bed_rest.sample_times(3.0, 1.0)
+    assert bed_rest.lammps_result(scene, times, path) == (dict(kinetic=[1]), "run now")
+    assert bed_rest.lammps_result(scene, times, path)[0] == dict(kinetic=[1])
+    assert bed_rest.lammps_result(other, times, path)[0] == dict(kinetic=[2])
+    assert bed_rest.lammps_result(scene, times[:2], path)[0] == dict(kinetic=[3])
+    assert len(runs) == 3 and len(bed_rest.load_runs(path)) == 3
+    assert bed_rest.load_runs(str(tmp_path / "none.json")) == []
 
 
 def test_bed_energy_table_quotes_lammps_from_its_stored_run():
