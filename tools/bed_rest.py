@@ -448,7 +448,8 @@ def main(argv=None):
         fills["LAMMPS, frictionless"], fill_source = lammps_fills(times, lammps_fill_count,
                                                                   path)
         source = f"{source}; its fills: {fill_source}" if lammps_fill_count else source
-    publish(report(args, times, results, fills, source) + accuracy_table(accuracy, times[-1], repeats)
+    publish(report(args, times, results, fills, source)
+            + accuracy_table(accuracy, times[-1], repeats)
             + growth_table(growth, CAPS[-1], accuracy[CAPS[-1]]["motion"]["rms_speed"]),
             "bed-rest", args.write)
     return 0
