@@ -120,10 +120,12 @@ def test_bed_rest_motion_is_per_diameter_and_the_table_says_so():
     assert f"| {3 * cap} | {2.904 * cap:.0f} |" in table and "checked, the same" in table
     assert "NOT the same" in bed_rest.accuracy_table({}, 3.0, False)
     growth = bed_rest.growth_table({100: [1e-5, 1e-5, 2e-5, 4e-5], 300: [1e-5] * 4,
-                                    30: [0.0, 0.0, 1e-5]}, 300, 9e-6)
+                                    30: [0.0, 0.0, 0.0, 1e-5]}, 300, 9e-6)
     assert "| 100 | 1.0e-05 | 1.0e-05 | 2.0e-05 | 4.0e-05 | 2.00 |" in growth
     assert "| 300 | 1.0e-05 | 1.0e-05 | 1.0e-05 | 1.0e-05 | 1.00 |" in growth
-    assert "| 30 | 0.0e+00 | 0.0e+00 | 1.0e-05 | - |" in growth and "9.0e-06 m/s" in growth
+    assert "| 30 | 0.0e+00 | 0.0e+00 | 0.0e+00 | 1.0e-05 | - |" in growth and "9.0e-06 m/s" in growth
+    every = bed_rest.growth_table({100: [1e-5, 2e-5, 4e-5, 8e-5]}, 300, 9e-6, every=2)
+    assert "| step 2 | step 4 |" in every and "| 100 | 2.0e-05 | 8.0e-05 | 2.00 |" in every
 
 
 def test_bed_rest_defaults_pass_its_checks_and_name_the_command():
