@@ -101,7 +101,7 @@ def test_bed_rest_motion_is_per_diameter_and_the_table_says_so():
     times = bed_rest.sample_times(3.0, 1.0)
     run = dict(kinetic=[1e-3, 2e-6, 5e-7], wall=0.8, motion=m)
     args = argparse.Namespace(until=3.0, every=1.0, fills=2, lammps_fills=1, no_lammps=False,
-                              write=False)
+                              write=False, section="long")
     text = bed_rest.report(args, times, {"defaults": run, "LAMMPS": dict(run, wall=None)},
                            {"taichi": [run, dict(run, kinetic=[1e-3, 5e-7, 4e-7])],
                             "LAMMPS": [dict(run, wall=None)], "none": []}, "run now")
@@ -111,7 +111,8 @@ def test_bed_rest_motion_is_per_diameter_and_the_table_says_so():
         "fills at most 1e-6 at each: 1, 2 |" in text
     assert "| LAMMPS, 1 fills: median (largest) | 2.0e-06 (2.0e-06) |" in text
     assert "none" not in text and text.count("| - |") == 2
-    assert "`python tools/bed_rest.py --until 3 --every 1 --fills 2 --lammps-fills 1`" in text
+    assert "`python tools/bed_rest.py --until 3 --every 1 --fills 2 --lammps-fills 1 " \
+        "--section long`" in text
     cap = bed_rest.DEFAULT_CAP
     table = bed_rest.accuracy_table({cap: dict(motion=m, sweeps=float(cap), wall=0.6),
                                      3 * cap: dict(motion=m, sweeps=2.904 * cap, wall=1.5)},
@@ -131,7 +132,7 @@ def test_bed_rest_motion_is_per_diameter_and_the_table_says_so():
 def test_bed_rest_defaults_pass_its_checks_and_name_the_command():
     args = argparse.Namespace(
         until=5.0, every=0.25, fills=8, lammps_fills=None, no_lammps=False,
-        lammps_only=False, lammps_json="x.json", write=True)
+        lammps_only=False, lammps_json="x.json", write=True, section="bed-rest")
     bed_rest.check_sampling(args, None)          # would call ap.error on a bad option
     assert bed_rest.command_text(args) == "python tools/bed_rest.py --write"
     args.until, args.no_lammps, args.write = 6.0, True, False
