@@ -58,7 +58,7 @@ sys.path.insert(0, HERE)
 
 import taichi_spheres as ts  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
-from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
+from machine import cpu_name, publish, untimed_pass  # noqa: E402  (tools/machine.py)
 from bed_steps import pour_fill  # noqa: E402
 import peer_lammps  # noqa: E402
 
@@ -135,13 +135,17 @@ def last_second(t: float, times) -> bool:
     return abs(t - (times[-1] - 1.0)) < 1e-9
 
 
+def rms_speed(v) -> float:
+    """Root mean square of the speeds of velocities v (N, 3) [m/s]."""
+    return float(np.sqrt((np.asarray(v) ** 2).sum(axis=1).mean()))
+
+
 def motion(x_start, x_end, v_end, diameter) -> dict:
     """Displacements / diameter over a window (median, p99, largest) and the rms speed
     at its end [m/s]; x (N, 3) [m] in the same sphere order, diameter (N,) [m]."""
     d = np.linalg.norm(x_end - x_start, axis=1) / diameter
     return dict(median=float(np.median(d)), p99=float(np.percentile(d, 99)),
-                largest=float(d.max()),
-                rms_speed=float(np.sqrt((np.asarray(v_end) ** 2).sum(axis=1).mean())))
+                largest=float(d.max()), rms_speed=rms_speed(v_end))
 
 
 def compiled_simulation(scene, tuning: dict, start=None):
@@ -149,12 +153,9 @@ def compiled_simulation(scene, tuning: dict, start=None):
     the kernels of its first step compiled (or loaded) by one untimed step taken
     back."""
     sim = ts.Simulation(scene, threads=1, tuning=Tuning().with_(**tuning))
-    if start is None:
-        start = sim.checkpoint()
-    else:
+    if start is not None:
         sim.restore(start)
-    sim.advance(sim.max_step())
-    sim.restore(start)
+    untimed_pass(sim, lambda s: s.advance(s.max_step()))
     return sim
 
 
@@ -208,16 +209,16 @@ def growth_row(scene, start, cap: int, steps: int) -> list:
     out = []
     for _ in range(steps):
         sim.step_toward(sim.time + sim.max_step())
-        out.append(float(np.sqrt((sim.state().v ** 2).sum(axis=1).mean())))
+        out.append(rms_speed(sim.state().v))
     return out
 
 
 def lammps_by_id(lmp):
-    """LAMMPS positions, velocities [m, m/s], masses [kg] and radii [m], by atom id."""
+    """peer_lammps.lammps_atoms (positions, velocities [m, m/s], masses [kg], radii
+    [m]) in atom-id order, which LAMMPS's own order is not (it sorts its atoms)."""
     nl = lmp.extract_global("nlocal")
     order = np.argsort(np.array(lmp.numpy.extract_atom("id")[:nl]))
-    x, v, m = (a[order] for a in peer_lammps.lammps_state(lmp))
-    return x, v, m, np.array(lmp.numpy.extract_atom("radius")[:nl])[order]
+    return tuple(a[order] for a in peer_lammps.lammps_atoms(lmp))
 
 
 def run_lammps(scene, times) -> dict:
