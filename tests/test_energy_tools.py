@@ -1,6 +1,6 @@
 """The energy-, overlap- and rate-measuring tools (tools/warm_start_energy.py,
 tools/bed_energy.py, tools/bed_rest.py, tools/step_overlaps.py, tools/silo_seeds.py,
-tools/solver_convergence.py): bad options are usage errors before any run, their
+tools/solver_convergence.py, tools/bed_conditioning.py): bad options are usage errors before any run, their
 tables say what was measured, and their arithmetic holds on cases with known answers.
 No timings or measured values are asserted (the tools are the measurement)."""
 import argparse
@@ -13,6 +13,7 @@ import pytest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
 
+import bed_conditioning  # noqa: E402  (tools/bed_conditioning.py)
 import bed_energy  # noqa: E402  (tools/bed_energy.py)
 import bed_rest  # noqa: E402  (tools/bed_rest.py)
 import bed_steps  # noqa: E402  (tools/bed_steps.py)
@@ -64,7 +65,9 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (bed_rest, ["--every", "0"], "--every must divide 1 s"),
     (bed_rest, ["--until", "nan"], "--until must be at least 3 s"),
     (bed_rest, ["--no-lammps", "--lammps-only"], "--no-lammps runs no LAMMPS"),
-    (bed_rest, ["--lammps-only", "--lammps-json", ""], "--lammps-only saves")])
+    (bed_rest, ["--lammps-only", "--lammps-json", ""], "--lammps-only saves"),
+    (bed_conditioning, ["--at", "0"], "--at takes times > 0"),
+    (bed_conditioning, ["--truth", "0"], "--truth at least 1")])
 def test_tools_refuse_bad_options(tool, argv, words, capsys):
     with pytest.raises(SystemExit) as exit_info:
         tool.main(argv)
@@ -411,3 +414,33 @@ def test_bed_steps_lists_the_steps_above_the_threshold_with_their_position_pass(
     assert worst == 2e-4
     assert rows == [(pytest.approx(1.03), 0.02, 100, 100, 100,
                      pytest.approx(3e-4 * 0.02 / 0.02), 2e-4)]
+
+
+def test_bed_conditioning_spectrum_counts_rank_and_small_eigenvalues():
+    """Eigenvalues at most 1e-10 of the largest are the null space; the smallest nonzero
+    one is reported over the largest; those below 1e-3 of it are counted."""
+    out = bed_conditioning.spectrum([0.0, 1e-12, 1e-4, 1.0, 2.0])
+    assert out["rank"] == 3 and out["largest"] == 2.0
+    assert out["smallest"] == pytest.approx(5e-5) and out["small"] == 1
+    assert bed_conditioning.spectrum([])["rank"] == 0
+
+
+def test_bed_conditioning_of_a_stack_on_the_floor():
+    """Two spheres stacked on the floor (1/m = 0.5 and 0.25 1/kg), both rows active: W =
+    [[0.5, -0.5], [-0.5, 0.75]] 1/kg, full rank, eigenvalues (1.25 -+ sqrt(1.0625)) / 2;
+    a third row repeating the floor row is redundant (rank 2 of 3)."""
+    p = dict(a=np.array([0, 1]), b=np.array([-1, 0]), normal=np.array([[0, 0, 1.0]] * 2),
+             meff=np.array([1.0, 1.0]), target=np.zeros(2), lam=np.zeros(2),
+             v=np.zeros((2, 3)), inv_mass=np.array([0.5, 0.25]), order=np.array([0, 1]))
+    out = bed_conditioning.active_spectrum(solver_convergence.Problem(p), np.array([6.0, 4.0]))
+    low, high = (1.25 - 1.0625 ** 0.5) / 2, (1.25 + 1.0625 ** 0.5) / 2
+    assert (out["active"], out["rank"]) == (2, 2)
+    assert out["largest"] == pytest.approx(high) and out["smallest"] == pytest.approx(low / high)
+    p.update(a=np.array([0, 1, 0]), b=np.array([-1, 0, -1]), normal=np.array([[0, 0, 1.0]] * 3),
+             meff=np.ones(3), target=np.zeros(3), lam=np.zeros(3), order=np.arange(3))
+    out = bed_conditioning.active_spectrum(solver_convergence.Problem(p),
+                                           np.array([3.0, 4.0, 3.0]))
+    assert (out["active"], out["rank"]) == (3, 2)
+    row = dict(out, at=6.0, rows=3, dofs=6, exact_speed=1e-3, engine_speed=2e-3, sweeps=100,
+               error=1.5e-3, residual=1e-6)
+    assert bed_conditioning.row_text(row).startswith("| 6 | 3 | 3 | 2 | 6 | 1 | 4 |")
