@@ -56,14 +56,17 @@ class Rules:
         for all contacts, and with friction any contact whose sliding turns makes its
         warm friction impulse add energy: in a discharging silo that cut the friction
         the warm start carries from step to step (docs/algorithm.md).
-    position_iterations: pseudo-velocity (split impulse) sweeps per step at most.
-    position_extension: more pseudo-velocity sweeps a step may run, at most, where its
-        capped pass left more than half of overlap_tolerance (its last sweep's largest
-        change x h over the smallest diameter, which tracks the largest overlap the
-        step leaves): they run until the pass converges or that many more ran (with
-        plain sweeps at the end, as the capped pass). 0 (default): none. Deep beds
-        whose longest steps leave overlaps above the tolerance at the cap then stay
-        within it, for more wall time where grains land (docs/bench.md,
+    position_iterations: pseudo-velocity (split impulse) sweeps per step at most; they
+        stop once a sweep meets no row overlapping by more than half of
+        overlap_tolerance of the smallest diameter (per step, at the pseudo-velocities
+        so far).
+    position_extension: more pseudo-velocity sweeps a step may run, at most, where the
+        pseudo-velocities of its capped pass would still leave a row overlapping by more
+        than half of overlap_tolerance (each row's gap moved by h times its
+        pseudo-velocities, linearised as the pass's targets): they run until the pass
+        meets no such row or that many more ran (with plain sweeps at the end, as the
+        capped pass). 50 by default (0: none): deep beds whose longest steps leave
+        overlaps above the tolerance at the cap then stay within it (docs/bench.md,
         "Position sweeps extended where a step leaves overlap").
     bounded_position_pass: with gravity, scale a step's pseudo-velocities down where
         they would lift spheres by more potential energy than the step's solve took
@@ -88,8 +91,8 @@ class Rules:
         position) that run plain (omega = 1), so that a solve stopped at its cap does
         not keep the overshoot (a column of light spheres under heavy ones flies apart
         without them).
-    overlap_tolerance: relative overlap the split impulse aims below (a tenth of it
-        of the smallest diameter per sweep), and above which the projection pushes
+    overlap_tolerance: relative overlap the split impulse aims below (its sweeps stop
+        at half of it of the smallest diameter), and above which the projection pushes
         apart the overlaps left when a step without a contact solver hit the sweep
         limit.
     shock_propagation: "auto", "on" or "off": after the velocity sweeps, one pass over
@@ -132,7 +135,7 @@ class Rules:
     relaxation: float = 1.8
     plain_sweeps: int = 10
     position_iterations: int = 60
-    position_extension: int = 0
+    position_extension: int = 50
     bounded_position_pass: bool = False
     overlap_tolerance: float = 1e-4
     shock_propagation: str = "auto"

@@ -90,9 +90,10 @@ class PackedRows:
                 acc[self.schedule[t]] = self.pack_acc[t]
 
     @ti.func
-    def update_packed(self, t, field: ti.template(), omega):
+    def update_packed(self, t, field: ti.template(), omega, violation: ti.template() = False):
         """pgs.update_from on the packed row t (the schedule's t-th) with relaxation
         ``omega``, on velocities or pseudo-velocities ``field`` ((N,) vec3 [m/s]);
-        returns its residual [m/s] (halved where halved_residual)."""
+        returns its residual [m/s] (halved where halved_residual; with ``violation``, the
+        overlap it met)."""
         return self.update_from(t, self.pack_a, self.pack_b, self.pack_n, self.pack_meff,
-                                field, self.pack_acc, self.pack_goal, omega)
+                                field, self.pack_acc, self.pack_goal, omega, violation)

@@ -7,6 +7,10 @@ where it has them (contacts/packed.py): the same bits.
 Row update (Catto's sequential impulses, Moreau–Jean): with u_n the row's normal
 relative velocity (separating > 0), lambda = max(lambda + omega m_eff (target - u_n),
 0) and the change applied to both spheres (Rules.relaxation = omega, 1.8 by default).
+A sweep's residual is the largest change it made to a velocity, or in the position
+pass the largest overlap a row still had when the sweep came to it (target - u_n of
+the pseudo-velocities, per step): that pass is there to bring overlaps within
+tolerance, and stops once none is left above it.
 Over-relaxed sweeps (omega != 1) overshoot: a solve stops only after a plain sweep
 (omega = 1) left every row within tolerance, and the last Rules.plain_sweeps sweeps of
 the cap run plain, so a solve stopped at its cap does not keep the overshoot (with
@@ -91,7 +95,7 @@ class GaussSeidel:
             if ti.static(self.f.friction):
                 self.warm_friction(s)
         elif ti.static(mode == POSITION):
-            out = self.update_row(s, self.w, self.mu, self.pos_target, omega)
+            out = self.update_row(s, self.w, self.mu, self.pos_target, omega, True)
         elif ti.static(self.f.friction):
             out = self.solve_friction(s)     # friction first, normal last
             out = ti.max(out, self.update_row(s, self.state.v, self.lam, self.target, omega))
@@ -100,19 +104,23 @@ class GaussSeidel:
         return out
 
     @ti.func
-    def update_row(self, s, field: ti.template(), acc: ti.template(), goal: ti.template(), omega):
+    def update_row(self, s, field: ti.template(), acc: ti.template(), goal: ti.template(), omega,
+                   violation: ti.template() = False):
         """Row s on velocities ``field`` with accumulated impulse ``acc`` and targets
         ``goal`` (update_from on the row fields)."""
         return self.update_from(s, self.row_a, self.row_b, self.normal, self.meff, field,
-                                acc, goal, omega)
+                                acc, goal, omega, violation)
 
     @ti.func
     def update_from(self, s, row_a: ti.template(), row_b: ti.template(),
                     normal: ti.template(), meff: ti.template(), field: ti.template(),
-                    acc: ti.template(), goal: ti.template(), omega):
+                    acc: ti.template(), goal: ti.template(), omega,
+                    violation: ti.template() = False):
         """Row s of the rows (row_a, row_b, normal, meff, acc, goal) on velocities
         ``field``: lambda = max(lambda + omega m_eff (goal - u_n), 0), applying the change;
-        returns |change| / m_eff [m/s], halved where halved_residual (full_residual)."""
+        returns |change| / m_eff [m/s], halved where halved_residual (full_residual), or
+        with ``violation`` (the position pass) max(goal - u_n, 0) before the update [m/s]:
+        how far the row still overlapped, per step."""
         a = row_a[s]
         b = row_b[s]
         n = normal[s]
@@ -121,10 +129,14 @@ class GaussSeidel:
             rel = rel - field[b]
         m = meff[s]
         old = acc[s]
-        new = ti.max(old + omega * m * (goal[s] - rel.dot(n)), 0)
+        short = goal[s] - rel.dot(n)
+        new = ti.max(old + omega * m * short, 0)
         acc[s] = new
         out = ti.cast(0, self.real)
-        if ti.static(self.halved_residual):
+        if ti.static(violation):
+            self.push(field, a, b, n, new - old)
+            out = ti.max(short, 0)
+        elif ti.static(self.halved_residual):
             out = self.push_halved(field, a, b, n, new - old)
         else:
             self.push(field, a, b, n, new - old)
@@ -261,7 +273,7 @@ class GaussSeidel:
         worst = ti.cast(0, self.real)
         for t in range(self.schedule_start[colour], self.schedule_start[colour + 1]):
             if ti.static(self.packed and mode == POSITION):
-                worst = ti.max(worst, self.update_packed(t, self.w, omega))
+                worst = ti.max(worst, self.update_packed(t, self.w, omega, True))
             elif ti.static(self.packed and mode == VELOCITY):
                 worst = ti.max(worst, self.update_packed(t, self.state.v, omega))
             else:
@@ -270,11 +282,11 @@ class GaussSeidel:
 
     @ti.func
     def full_residual(self, worst, mode: ti.template()):
-        """The largest change [m/s] of a sweep whose row updates returned at most
-        ``worst``: twice that where they return it halved (halved_residual: push_halved;
-        WARM returns 0)."""
+        """The residual [m/s] of a sweep whose row updates returned at most ``worst``:
+        twice that where velocity updates return it halved (halved_residual:
+        push_halved; WARM returns 0, POSITION the largest overlap met, whole)."""
         out = worst
-        if ti.static(self.halved_residual and mode != WARM):
+        if ti.static(self.halved_residual and mode == VELOCITY):
             out = worst * 2
         return out
 
@@ -321,13 +333,15 @@ class GaussSeidel:
 
     @ti.func
     def set_tolerances(self):
-        """This step's convergence tolerances (tol_v, tol_w) [m/s], the position
-        residual above which Rules.position_extension's sweeps run (tol_x: half of
-        overlap_tolerance of the smallest diameter per step) and sweep caps (cap_v,
-        cap_w; plain_v, plain_w: the plain sweeps that end them) (kernel top level)."""
+        """This step's convergence tolerances [m/s]: tol_v of the velocity sweeps' largest
+        change, tol_w of the overlap the position sweeps leave per step (half of
+        overlap_tolerance of the smallest diameter per step: a position sweep's residual
+        is the largest overlap it met, update_from's ``violation``; and the overlap above
+        which Rules.position_extension's sweeps run, solver.overlap_left); and sweep caps
+        (cap_v, cap_w; plain_v, plain_w: the plain sweeps that end them) (kernel top
+        level)."""
         self.tol_v[None] = ti.static(self.rules.contact_tolerance) * self.impact_speed()
-        self.tol_w[None] = self.tol_len[None] / self.params.h[None]
-        self.tol_x[None] = 5 * self.tol_len[None] / self.params.h[None]   # (tol_len: 1/10)
+        self.tol_w[None] = 5 * self.tol_len[None] / self.params.h[None]   # (tol_len: 1/10)
         self.set_cap(self.cap_v, self.plain_v, self.full_v[None])
         self.set_cap(self.cap_w, self.plain_w, self.full_w[None])
 

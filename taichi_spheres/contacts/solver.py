@@ -41,14 +41,14 @@ of the sphere for a wall row); cells of one colour have disjoint 2x2x2 blocks
 (pairs by sphere ids, then wall rows: Box2D solves them last), with no races, and
 the result does not depend on the thread count (where the sweeps run on one CPU
 thread, it sweeps a few cells of a colour interleaved, the same bits:
-pgs.sweep_cells). Iterations stop when no row changed a velocity by more than
-``Rules.contact_tolerance`` x the impact speed (or the positions by more than a tenth
-of ``Rules.overlap_tolerance`` of the smallest diameter), at most
-``Rules.contact_iterations`` / ``position_iterations`` (with
-``Rules.step_scaled_sweeps``, caps scaled to the step: pgs.set_cap); a position pass
-whose last sweep still changed the positions by more than half of
-``Rules.overlap_tolerance`` of the smallest diameter runs up to
-``Rules.position_extension`` more sweeps (0 by default: none).
+pgs.sweep_cells). Velocity iterations stop when no row changed a velocity by more
+than ``Rules.contact_tolerance`` x the impact speed, position iterations when no row
+they met still overlapped by more than half of ``Rules.overlap_tolerance`` of the
+smallest diameter, at most ``Rules.contact_iterations`` / ``position_iterations``
+(with ``Rules.step_scaled_sweeps``, caps scaled to the step: pgs.set_cap); a position
+pass stopped at its cap whose pseudo-velocities would still leave a row overlapping
+by more than that (overlap_left) runs up to ``Rules.position_extension`` more sweeps
+(50 by default).
 
 A mixin-free class over the engine's state, grid, parameters and pair geometry.
 """
@@ -201,7 +201,7 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         self.residual = ti.field(real, shape=())     # largest change of the last sweep
         self.n_rows = ti.field(ti.i32, shape=())
         self.tol_v = ti.field(real, shape=())        # velocity tolerance of this step [m/s]
-        self.tol_w = ti.field(real, shape=())        # pseudo-velocity tolerance [m/s]
+        self.tol_w = ti.field(real, shape=())        # overlap left per step [m/s]
         self.n_colours_f = ti.field(ti.i32, shape=())
         self.tol_len = ti.field(real, shape=())      # position tolerance [m] (bind)
         self._allocate_sweep_control()
@@ -217,10 +217,10 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         # this step's sweep caps and plain sweeps (velocity, position: pgs.set_cap)
         self.cap_v = ti.field(ti.i32, shape=())
         self.cap_w = ti.field(ti.i32, shape=())
-        # Rules.position_extension: its sweeps, and the residual above which they run
-        # (half of overlap_tolerance of the smallest diameter per step) [m/s]
+        # Rules.position_extension's sweeps (run where overlap_left exceeds tol_w) and
+        # overlap_left's result [m/s]
         self.cap_x = ti.field(ti.i32, shape=())
-        self.tol_x = ti.field(self.real, shape=())
+        self.left_x = ti.field(self.real, shape=())
         self.cap_p = ti.field(ti.i32, shape=())      # the running position pass's cap
         self.plain_v = ti.field(ti.i32, shape=())
         self.plain_w = ti.field(ti.i32, shape=())
@@ -517,20 +517,38 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
 
     @ti.func
     def position_pass_serially(self):
-        """The position sweeps (iterate_serially, capped at cap_w), and where they stop at
-        the cap with a residual above tol_x, up to cap_x more (Rules.position_extension;
-        one inlined copy of the sweeps); returns the sweeps run."""
+        """The position sweeps (iterate_serially, capped at cap_w), and where they stop
+        leaving an overlap above tol_w (overlap_left), up to cap_x more
+        (Rules.position_extension; one inlined copy of the sweeps); returns the sweeps
+        run."""
         self.cap_p[None] = self.cap_w[None]
         n = 0
         rounds = 0
         while rounds >= 0:
             n += self.iterate_serially(POSITION, self.cap_p, self.plain_w, self.tol_w)
             rounds += 1
-            if rounds == 1 and self.cap_x[None] > 0 and self.residual[None] > self.tol_x[None]:
+            if rounds == 1 and self.cap_x[None] > 0 and self.overlap_left() > self.tol_w[None]:
                 self.cap_p[None] = self.cap_x[None]
             else:
                 rounds = -1
         return n
+
+    @ti.func
+    def overlap_left(self):
+        """The largest overlap the position pass's pseudo-velocities so far would leave
+        on a row, per step [m/s]: max over the rows of -(gap / h + (w_a - w_b).n)
+        (linearised, as the pass's targets; 0 where none; a max: any loop order)."""
+        h = self.params.h[None]
+        self.left_x[None] = 0
+        ti.loop_config(serialize=ti.static(self.serial))
+        for s in range(ti.min(self.n_rows[None], ti.static(self.capacity))):
+            a = self.row_a[s]
+            b = self.row_b[s]
+            rel = self.w[a]
+            if b >= 0:
+                rel = rel - self.w[b]
+            ti.atomic_max(self.left_x[None], -(self.gap[s] / h + rel.dot(self.normal[s])))
+        return self.left_x[None]
 
     def _build_kernels(self):
         """The kernels solve() launches (plain closures: no per-launch `self` dispatch)."""
@@ -595,6 +613,11 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
             params.position_iterations[None] = positions
             self.finish()
 
+        @ti.kernel
+        def overlap_left() -> self.real:
+            return self.overlap_left()
+
+        self._overlap_left = overlap_left
         self._serial_solve_kernel = serial_solve_kernel
         self._staged_solve_kernels = staged_solve_kernels
         self._serial_solves = {}
@@ -675,7 +698,7 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         self.params.contact_residual[None] = self.residual[None]
         self._middle()
         positions = self._iterate(POSITION, self.cap_w, self.plain_w, self.tol_w)
-        if self.extension > 0 and self.residual[None] > self.tol_x[None]:
+        if self.extension > 0 and self._overlap_left() > self.tol_w[None]:
             positions += self._iterate(POSITION, self.cap_x, self.plain_w, self.tol_w)
         self._end(iterations, positions)
 
