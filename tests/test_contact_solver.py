@@ -317,8 +317,9 @@ def test_overlap_recovery_moves_positions_not_velocities(arch, shock):
 def test_position_extension_removes_what_a_capped_pass_leaves(arch):
     """The pressed column of the last test with 3 position sweeps per step: the first
     step leaves most of its overlap; with Rules.position_extension the pass, stopped at
-    its cap with more than half the overlap tolerance left, runs on until it converges,
-    in positions only (the velocities keep their bits)."""
+    its cap with more than half the overlap tolerance left, runs on until no row it
+    meets overlaps by more than that, in positions only (the velocities keep their
+    bits)."""
     scene = _column(10)
     x = scene.x.copy()
     x[:, 2] = 0.95 * R + 0.95 * 2 * R * np.arange(10)

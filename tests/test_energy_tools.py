@@ -67,7 +67,8 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (bed_rest, ["--no-lammps", "--lammps-only"], "--no-lammps runs no LAMMPS"),
     (bed_rest, ["--lammps-only", "--lammps-json", ""], "--lammps-only saves"),
     (bed_conditioning, ["--at", "0"], "--at takes times > 0"),
-    (bed_conditioning, ["--truth", "0"], "--truth at least 1")])
+    (bed_conditioning, ["--at", "nan"], "--at takes times > 0"),
+    (bed_conditioning, ["--truth", "0"], "--truth must be at least 1")])
 def test_tools_refuse_bad_options(tool, argv, words, capsys):
     with pytest.raises(SystemExit) as exit_info:
         tool.main(argv)
@@ -184,7 +185,7 @@ def test_step_overlaps_table_names_the_command_and_both_settings():
         "| 4.70e-06 |" in text
     assert "| former defaults | 6.60e-04 (1.138) | 6.60e-04 | 2008 | 3000 |" in text
     assert "- former defaults: `Tuning().with_(relaxation=1.0, position_iterations=100, " \
-        "substeps=False, step_scaled_sweeps=False)`" in text
+        "substeps=False, step_scaled_sweeps=False, position_extension=0)`" in text
 
 
 def test_step_overlaps_and_settings_tradeoff_name_their_variants():

@@ -7,10 +7,10 @@ tools/settings_tradeoff.py are seeds 1..8) to --start s, then steps it one by on
 --end s (1 thread, f64) under --step-fraction and --tuning, and lists every step that
 leaves an overlap (stats' max_overlap of the step / contact distance) above
 --threshold: its time and length, the velocity and position sweeps it ran against the
-position cap, and the position pass's last residual (the largest change of a row in
-its last sweep [m/s]) times the step over the smallest diameter, the quantity
-Rules.position_extension tests (contacts/pgs.py set_tolerances), beside the overlap
-the step left. Ends with the largest overlap of the phase.
+position cap, and the position pass's last residual (the largest overlap a row had
+when its last sweep came to it, per step [m/s]: contacts/pgs.py update_from) times
+the step over the smallest diameter, the quantity its sweeps stop on, beside the
+overlap the step left. Ends with the largest overlap of the phase.
 
     python tools/bed_steps.py --seed 1 --step-fraction 0.2 --tuning position_iterations=100
 """

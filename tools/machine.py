@@ -123,9 +123,10 @@ def tuning_args(items, ap) -> dict:
 
 #: the contact solver's former defaults (CHANGELOG): plain sweeps (no over-relaxation), at
 #: most 100 velocity (as now) and 100 position sweeps, the full caps in every step, no
-#: substeps (Tuning.with_ keywords); the tools' "former defaults" variants run them
+#: substeps, no position extension (Tuning.with_ keywords); the tools' "former defaults"
+#: variants run them (with today's position pass, which stops on the overlap it meets)
 FORMER_DEFAULTS = dict(relaxation=1.0, position_iterations=100, substeps=False,
-                       step_scaled_sweeps=False)
+                       step_scaled_sweeps=False, position_extension=0)
 
 
 def step_fraction_option(step_fraction) -> dict:

@@ -10,7 +10,9 @@ relative velocity (separating > 0), lambda = max(lambda + omega m_eff (target - 
 A sweep's residual is the largest change it made to a velocity, or in the position
 pass the largest overlap a row still had when the sweep came to it (target - u_n of
 the pseudo-velocities, per step): that pass is there to bring overlaps within
-tolerance, and stops once none is left above it.
+tolerance, and stops once a plain sweep meets none above it (a later update of that
+sweep can reopen a row it met: Rules.position_extension's test, solver.overlap_left,
+looks at every row after the pass).
 Over-relaxed sweeps (omega != 1) overshoot: a solve stops only after a plain sweep
 (omega = 1) left every row within tolerance, and the last Rules.plain_sweeps sweeps of
 the cap run plain, so a solve stopped at its cap does not keep the overshoot (with
@@ -87,8 +89,9 @@ class GaussSeidel:
         """Row s in one sweep: WARM applies its warm-start impulse (a pass of its own
         before the iterations, so that every row starts from last step's impulses);
         VELOCITY and POSITION make one projected Gauss-Seidel update (VELOCITY: with
-        friction, the friction rows first: contacts/friction_rows.py). Returns the
-        velocity change it made [m/s] (0 for WARM)."""
+        friction, the friction rows first: contacts/friction_rows.py). Returns its
+        residual [m/s]: the velocity change it made (VELOCITY), the overlap it met per
+        step (POSITION: update_from's ``violation``), 0 for WARM."""
         out = ti.cast(0, self.real)
         if ti.static(mode == WARM):
             self.push(self.state.v, self.row_a[s], self.row_b[s], self.normal[s], self.lam[s])
@@ -193,7 +196,7 @@ class GaussSeidel:
         the cells share no sphere, so the bits are those of one cell after the other,
         while the processor overlaps the cells' updates: a row update waits on the
         previous one of its cell (they share a sphere), not on the other cells'. The
-        largest change goes to ``residual``."""
+        largest residual (full_residual) goes to ``residual``."""
         lo = ti.Vector.zero(ti.i32, k)
         hi = ti.Vector.zero(ti.i32, k)
         longest = 0
@@ -269,7 +272,7 @@ class GaussSeidel:
         """One serial pass over colour ``colour``'s rows in schedule order
         (schedule_rows; call where everything runs serially), velocity and position
         updates from the packed rows where the solver keeps them (contacts/packed.py);
-        the largest change goes to ``residual``."""
+        the largest residual (full_residual) goes to ``residual``."""
         worst = ti.cast(0, self.real)
         for t in range(self.schedule_start[colour], self.schedule_start[colour + 1]):
             if ti.static(self.packed and mode == POSITION):

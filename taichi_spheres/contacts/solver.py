@@ -46,9 +46,9 @@ than ``Rules.contact_tolerance`` x the impact speed, position iterations when no
 they met still overlapped by more than half of ``Rules.overlap_tolerance`` of the
 smallest diameter, at most ``Rules.contact_iterations`` / ``position_iterations``
 (with ``Rules.step_scaled_sweeps``, caps scaled to the step: pgs.set_cap); a position
-pass stopped at its cap whose pseudo-velocities would still leave a row overlapping
-by more than that (overlap_left) runs up to ``Rules.position_extension`` more sweeps
-(50 by default).
+pass whose pseudo-velocities would still leave a row overlapping by more than that
+(overlap_left; at its cap, or where a sweep's later updates reopened a row it had met
+within) runs up to ``Rules.position_extension`` more sweeps (50 by default).
 
 A mixin-free class over the engine's state, grid, parameters and pair geometry.
 """
@@ -198,7 +198,9 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         self.n_colours = 0
         self.margin = ti.field(real, shape=())       # speculative margin [m]
         self.h_prev = ti.field(real, shape=())       # length of the last solved step [s]
-        self.residual = ti.field(real, shape=())     # largest change of the last sweep
+        # the last sweep's residual: its largest velocity change, or in the position
+        # pass the largest overlap it met (per step) [m/s]
+        self.residual = ti.field(real, shape=())
         self.n_rows = ti.field(ti.i32, shape=())
         self.tol_v = ti.field(real, shape=())        # velocity tolerance of this step [m/s]
         self.tol_w = ti.field(real, shape=())        # overlap left per step [m/s]
@@ -527,7 +529,11 @@ class ContactSolver(ContactRows, GaussSeidel, PackedRows, FrictionRows, ShockPro
         while rounds >= 0:
             n += self.iterate_serially(POSITION, self.cap_p, self.plain_w, self.tol_w)
             rounds += 1
-            if rounds == 1 and self.cap_x[None] > 0 and self.overlap_left() > self.tol_w[None]:
+            extend = 0
+            if rounds == 1 and self.cap_x[None] > 0:     # (nested: Taichi evaluates
+                if self.overlap_left() > self.tol_w[None]:   # every operand of `and`)
+                    extend = 1
+            if extend != 0:
                 self.cap_p[None] = self.cap_x[None]
             else:
                 rounds = -1
