@@ -43,17 +43,13 @@ sys.path.insert(0, HERE)
 
 import taichi_spheres as ts  # noqa: E402
 from machine import cpu_name, publish  # noqa: E402  (tools/machine.py)
+from bed_rest import rms_speed  # noqa: E402  (tools/bed_rest.py)
 from solver_convergence import Problem, apgd, capture, delassus  # noqa: E402
 
 #: eigenvalues of W_AA at most this share of the largest count as zero (its null space)
 ZERO = 1e-10
 #: eigenvalues below this share of the largest are reported as small
 SMALL = 1e-3
-
-
-def rms_speed(v) -> float:
-    """Root mean square of the rows of v (N, 3) [m/s]."""
-    return float(np.sqrt((np.asarray(v) ** 2).sum(axis=1).mean()))
 
 
 def spectrum(eigenvalues) -> dict:
