@@ -1,6 +1,6 @@
 """The energy-, overlap- and rate-measuring tools (tools/warm_start_energy.py,
 tools/bed_energy.py, tools/bed_rest.py, tools/step_overlaps.py, tools/silo_seeds.py,
-tools/solver_convergence.py, tools/bed_conditioning.py): bad options are usage errors before any run, their
+tools/solver_convergence.py, tools/bed_conditioning.py, tools/pile_rest.py): bad options are usage errors before any run, their
 tables say what was measured, and their arithmetic holds on cases with known answers.
 No timings or measured values are asserted (the tools are the measurement)."""
 import argparse
@@ -17,6 +17,7 @@ import bed_conditioning  # noqa: E402  (tools/bed_conditioning.py)
 import bed_energy  # noqa: E402  (tools/bed_energy.py)
 import bed_rest  # noqa: E402  (tools/bed_rest.py)
 import bed_steps  # noqa: E402  (tools/bed_steps.py)
+import pile_rest  # noqa: E402  (tools/pile_rest.py)
 import silo_seeds  # noqa: E402  (tools/silo_seeds.py)
 import row_activity  # noqa: E402  (tools/row_activity.py)
 import solver_convergence  # noqa: E402  (tools/solver_convergence.py)
@@ -68,6 +69,11 @@ import warm_start_energy  # noqa: E402  (tools/warm_start_energy.py)
     (bed_rest, ["--lammps-only", "--lammps-json", ""], "--lammps-only saves"),
     (bed_conditioning, ["--at", "0"], "--at takes times > 0"),
     (bed_conditioning, ["--at", "nan"], "--at takes times > 0"),
+    (pile_rest, ["--n-side", "1"], "--n-side must be >= 2"),
+    (pile_rest, ["--settle", "0"], "--settle must be a finite time > 0 s"),
+    (pile_rest, ["--settle", "nan"], "--settle must be a finite time > 0 s"),
+    (pile_rest, ["--settle", "inf"], "--settle must be a finite time > 0 s"),
+    (pile_rest, ["--seeds", "1", "-2"], "--seeds must be >= 0"),
     (bed_conditioning, ["--truth", "0"], "--truth must be at least 1")])
 def test_tools_refuse_bad_options(tool, argv, words, capsys):
     with pytest.raises(SystemExit) as exit_info:
@@ -445,3 +451,46 @@ def test_bed_conditioning_of_a_stack_on_the_floor():
     row = dict(out, at=6.0, rows=3, dofs=6, exact_speed=1e-3, engine_speed=2e-3, sweeps=100,
                error=1.5e-3, residual=1e-6)
     assert bed_conditioning.row_text(row).startswith("| 6 | 3 | 3 | 2 | 6 | 1 | 4 |")
+
+
+def test_pile_rest_tells_free_sliders_from_spheres_still_settling():
+    """Of the spheres faster than 1e-6 m/s at the end of the hold, those whose velocity
+    did not change over the last second slide freely; drift is the largest
+    displacement / diameter, of all spheres and of the others; overlap the largest at
+    any sample (pairs and box walls) / diameter."""
+    scene = pile_rest.pile(2, seed=1)
+    assert scene.n == 12 and np.allclose(scene.box_hi, (0.055, 0.055, 0.3))
+    d = 2 * pile_rest.RADIUS
+    x0 = np.array([[0.01, 0.01, 0.01], [0.04, 0.01, 0.01], [0.01, 0.04, 0.01]])
+    v_prev = np.array([[0, 2e-6, 0], [3e-6, 0, 0], [0, 0, 1e-7]], float)
+    v1 = np.array([[0, 2e-6, 0], [2e-6, 0, 0], [0, 0, 1e-7]], float)   # sphere 2: slow
+    x1 = x0 + np.array([[0, 2e-5, 0], [4e-6, 0, 0], [0, 0, 0]])
+    samples = [(x0, np.zeros((3, 3)))] + [(x1, v_prev), (x1, v1)]
+    out = pile_rest.hold_report(samples, scene)
+    assert (out["moving"], out["free"]) == (2, 1)
+    assert out["largest_speed"] == pytest.approx(2e-6)
+    assert out["drift"] == pytest.approx(2e-5 / d) and out["drift_others"] == pytest.approx(4e-6 / d)
+    assert out["overlap"] == 0.0
+    x1 = x1.copy()
+    x1[2] = x1[0] + (0, 0.0199, 0)           # centres 0.0199 m apart: 1e-4 m of overlap
+    assert pile_rest.hold_report(samples[:2] + [(x1, v1)], scene)["overlap"] == \
+        pytest.approx(1e-4 / d)
+    x1[2] = (0.0099, 0.04, 0.01)             # 1e-4 m into the wall at x = 0
+    assert pile_rest.hold_report(samples[:2] + [(x1, v1)], scene)["overlap"] == \
+        pytest.approx(1e-4 / d)
+
+
+def test_pile_rest_table_names_each_run_and_leaves_lammps_counters_empty():
+    """A row per run and fill, with '-' where LAMMPS has no counter; the command line
+    without --write heads the section."""
+    r = dict(kinetic=(1e-9, 2e-10), moving=3, free=1, largest_speed=2e-6, drift=1e-4,
+             drift_others=5e-5, overlap=1e-5, hits=0, wall=1.25)
+    assert pile_rest.row("taichi_spheres, frictionless", 2, r) == (
+        "| taichi_spheres, frictionless | 2 | 1.0e-09 | 2.0e-10 | 3 | 1 | 2.0e-06 | 1.0e-04 | "
+        "5.0e-05 | 1.0e-05 | 0 | 1.2 |")
+    assert pile_rest.row("LAMMPS", 1, dict(r, hits=None, wall=None)).endswith("| - | - |")
+    args = argparse.Namespace(n_side=10, settle=6.0)
+    text = pile_rest.report(args, [("LAMMPS", 1, dict(r, hits=None, wall=None))],
+                            ["--seeds", "1", "--write"])
+    assert "`python tools/pile_rest.py --seeds 1`" in text
+    assert "300 spheres of d = 20 mm" in text and "held from 6 to 16 s" in text

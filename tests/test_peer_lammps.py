@@ -197,3 +197,14 @@ def test_saved_lammps_run_only_on_its_cpu_model():
         peer_lammps.same_machine(elsewhere, args, ap)
     args.only = "both"
     assert peer_lammps.same_machine(elsewhere, args, ap) is None
+
+
+def test_scene_report_says_whether_the_machine_was_shared():
+    """The load averages at the start and end of a run say whether other work ran: above
+    the run's own threads by more than half a core, the report says the machine was
+    shared."""
+    args = types.SimpleNamespace(threads=1, lammps_threads=1)
+    alone = peer_lammps.machine_load_text((1.0, 1.2), args)
+    assert alone.startswith("no other work on the machine: load average 1.0")
+    shared = peer_lammps.machine_load_text((0.2, 1.9), args)
+    assert shared.startswith("shared machine:") and "1.9 at the end" in shared

@@ -42,6 +42,7 @@ later, such as the contact solver's at the first contact, compile before 1 s).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
 import json
 import math
@@ -221,27 +222,39 @@ def lammps_by_id(lmp):
     return tuple(a[order] for a in peer_lammps.lammps_atoms(lmp))
 
 
-def run_lammps(scene, times) -> dict:
-    """As run_taichi for LAMMPS (no wall time): kinetic energy / initial energy at
-    ``times`` and motion() over the last second."""
+def lammps_samples(scene, times):
+    """LAMMPS GRANULAR (frictionless Hertz as tools/peer_lammps.py: YOUNG, POISSON, DT,
+    one thread) from ``scene``'s spheres: yields lammps_by_id's (x, v, m, r) at t = 0,
+    then at each of ``times`` [s] (increasing); SystemExit where LAMMPS is missing."""
     lammps, why = peer_lammps.import_lammps()
     if lammps is None:
         raise SystemExit(f"LAMMPS: {why}")
     lmp = peer_lammps.lammps_scene_setup(lammps, scene, 1, YOUNG, POISSON, DT)
-    lmp.command("run 0")
-    x, v, m, _ = lammps_by_id(lmp)
-    e0 = peer_lammps.energies(x, v, m, scene.gravity)[1]
-    kinetic, done, x_last = [], 0, None
-    for t in times:
-        steps = int(round(t / DT)) - done
-        lmp.command(f"run {steps} pre no post no")
-        done += steps
-        x, v, m, r = lammps_by_id(lmp)
-        kinetic.append(peer_lammps.energies(x, v, m, scene.gravity)[0] / e0)
-        if last_second(t, times):
-            x_last = x.copy()
-        print(f"LAMMPS t = {t:g} s: K / E0 = {kinetic[-1]:.2e}", flush=True)
-    lmp.close()
+    try:
+        lmp.command("run 0")
+        yield lammps_by_id(lmp)
+        done = 0
+        for t in times:
+            steps = int(round(t / DT)) - done
+            lmp.command(f"run {steps} pre no post no")
+            done += steps
+            yield lammps_by_id(lmp)
+    finally:
+        lmp.close()
+
+
+def run_lammps(scene, times) -> dict:
+    """As run_taichi for LAMMPS (no wall time): kinetic energy / initial energy at
+    ``times`` and motion() over the last second."""
+    with contextlib.closing(lammps_samples(scene, times)) as samples:
+        x, v, m, _ = next(samples)
+        e0 = peer_lammps.energies(x, v, m, scene.gravity)[1]
+        kinetic, x_last = [], None
+        for t, (x, v, m, r) in zip(times, samples):
+            kinetic.append(peer_lammps.energies(x, v, m, scene.gravity)[0] / e0)
+            if last_second(t, times):
+                x_last = x.copy()
+            print(f"LAMMPS t = {t:g} s: K / E0 = {kinetic[-1]:.2e}", flush=True)
     return dict(kinetic=kinetic, wall=None, motion=motion(x_last, x, v, 2 * r))
 
 

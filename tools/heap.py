@@ -222,7 +222,7 @@ def report(rows, argv, threads, scene_path) -> str:
              "", f"Scene `{scene_path}`; profile angle from the surface profile between 20 % "
                  "and 80 % of the heap's height above the platform; fixed-base angle "
                  "atan((H - d) / R), H the heap's height, R the platform's radius. Wall time: "
-                 "the whole run, on a machine shared with other work.", "",
+                 "the whole run.", "",
              "| seed | mu | mu_r | profile angle [deg] | fixed-base angle [deg] | heap height "
              "[mm] | simulated [s] | wall [s] | max overlap / d |",
              "|---|---|---|---|---|---|---|---|---|"]

@@ -327,6 +327,18 @@ def contact_time(young, poisson, v, radius=RADIUS, mass=None):
     return tc, dmax
 
 
+def machine_load_text(loads, args) -> str:
+    """What the load averages at the start and end of a scene run, ``loads`` (two
+    floats), say about the machine: shared where either is above the run's own threads
+    (the larger of --threads and --lammps-threads) by more than half a core."""
+    own = max(args.threads, args.lammps_threads)
+    text = f"load average {loads[0]:.1f} at the start, {loads[1]:.1f} at the end"
+    if max(loads) > own + 0.5:
+        return ("shared machine: other processes ran on the same cores, so wall times "
+                f"carry noise of tens of per cent; {text}")
+    return f"no other work on the machine: {text}, the run's own {own} thread(s)"
+
+
 def lammps_threads_text(threads):
     if threads > 1:
         return (f"1 MPI rank, OPENMP package with {threads} threads (`-pk omp {threads} -sf omp`): "
@@ -1040,9 +1052,7 @@ def scene_header_lines(args, results, elapsed, saved, loads):
         f"# Side by side with LAMMPS (GRANULAR): scene {os.path.basename(args.scene_file)}",
         "",
         f"Generated {datetime.date.today().isoformat()} by `{command}` on {cpu_name()}, "
-        f"{os.cpu_count()} CPU threads (shared machine: other processes ran on the same "
-        f"cores, so wall times carry noise of tens of per cent; load average "
-        f"{loads[0]:.1f} at the start, {loads[1]:.1f} at the end), in {elapsed:.0f} s. "
+        f"{os.cpu_count()} CPU threads ({machine_load_text(loads, args)}), in {elapsed:.0f} s. "
         f"taichi_spheres on Taichi {'.'.join(map(str, ti.__version__))}, arch cpu, f64, "
         f"{args.threads} thread{'s' if args.threads > 1 else ''}"
         f"{', ' + fused_text(ts_r, args.no_fused) if ts_r else ''}"
