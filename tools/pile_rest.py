@@ -79,21 +79,12 @@ def sample_times(settle: float) -> list:
     return [settle + k for k in range(int(HOLD) + 1)]
 
 
-def overlap(x, scene) -> float:
-    """Largest pair or box-wall overlap / contact distance of positions x (N, 3) [m] of
-    equal spheres of radius RADIUS in ``scene``'s box (brute force over all pairs)."""
-    d = np.linalg.norm(x[:, None] - x[None], axis=-1)
-    np.fill_diagonal(d, np.inf)
-    pair = (2 * RADIUS - d.min()) / (2 * RADIUS)
-    wall = -min((x - RADIUS - scene.box_lo).min(), (scene.box_hi - x - RADIUS).min())
-    return max(0.0, float(pair), float(wall / (2 * RADIUS)))
-
-
 def hold_report(samples: list, scene) -> dict:
     """From (x, v) samples (N, 3) [m, m/s] at sample_times: speeds above REST_SPEED at
     the end, those of them sliding freely (velocity within FREE of the sample before),
     the largest speed [m/s], the largest displacement over the hold / diameter of all
-    spheres and of the others, and the largest overlap / diameter at the samples."""
+    spheres and of the others, and the largest pair or box-wall overlap / diameter at
+    the samples (peer_lammps.largest_overlaps)."""
     (x0, _), (_, v_prev), (x1, v1) = samples[0], samples[-2], samples[-1]
     speed = np.linalg.norm(v1, axis=1)
     moving = speed > REST_SPEED
@@ -102,7 +93,8 @@ def hold_report(samples: list, scene) -> dict:
     others = moved[~free]
     return dict(moving=int(moving.sum()), free=int(free.sum()), largest_speed=float(speed.max()),
                 drift=float(moved.max()), drift_others=float(others.max()) if others.size else 0.0,
-                overlap=max(overlap(x, scene) for x, _ in samples))
+                overlap=max(max(peer_lammps.largest_overlaps(
+                    x, np.full(len(x), RADIUS), scene.box_lo, scene.box_hi)) for x, _ in samples))
 
 
 def run_taichi(scene, settle: float, tuning: dict) -> dict:
