@@ -9,7 +9,8 @@ from .geometry import Cylinder
 from .materials import Material
 from .scene import Scene
 
-__all__ = ["gas", "same_bits_scene", "same_bits_case_scene", "fcc_block", "ball_on_block"]
+__all__ = ["gas", "same_bits_scene", "same_bits_case_scene", "fcc_block", "ball_on_block",
+           "box_pile", "PILE_RADIUS"]
 
 
 def gas(n, packing=0.3, radius=0.5, periodic=True, gravity=(0.0, 0.0, 0.0), restitution=1.0,
@@ -118,6 +119,27 @@ def fcc_block(cells=(5, 5, 10), radius=0.01, spacing=1.0 + 1e-6, restitution=0.5
                              box=((0, 0, 0), (side[0], side[1], cells[2] * a + 0.1)),
                              gravity=(0, 0, -gravity), restitution=restitution,
                              wall_restitution=restitution)
+
+
+#: radius of box_pile's spheres [m]
+PILE_RADIUS = 0.01
+
+
+def box_pile(n_side=4, friction=0.5, rolling_friction=0.0, restitution=0.5, seed=3):
+    """n_side^2 x 3 spheres of radius PILE_RADIUS dropped into a box they fill about 1.6
+    layers deep: a jittered lattice (spacing 25 mm, up to 2 mm of horizontal jitter,
+    layers at 20, 50 and 80 mm) with random velocities up to 0.2 m/s per component
+    (``seed``), in a box n_side x 25 + 5 mm wide and 0.3 m tall; ``restitution``
+    between spheres and on the walls, sliding and rolling ``friction``."""
+    rng = np.random.default_rng(seed)
+    g = np.arange(n_side) * 0.025 + 0.015
+    x = np.array([(a, b, c) for a in g for b in g for c in (0.02, 0.05, 0.08)], float)
+    x[:, :2] += rng.uniform(-2e-3, 2e-3, (len(x), 2))
+    v = rng.uniform(-0.2, 0.2, x.shape)
+    side = n_side * 0.025 + 0.005
+    return Scene.from_arrays(x, v, PILE_RADIUS, box=((0, 0, 0), (side, side, 0.3)),
+                             restitution=restitution, wall_restitution=restitution,
+                             friction=friction, rolling_friction=rolling_friction)
 
 
 def ball_on_block(block: Scene, settled, ratio=8.0, height=0.05, speed=1.0, offset=0.0,

@@ -11,6 +11,8 @@ import types
 import numpy as np
 import pytest
 
+from taichi_spheres.builders import box_pile
+
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
 
 import bed_conditioning  # noqa: E402  (tools/bed_conditioning.py)
@@ -458,7 +460,7 @@ def test_pile_rest_tells_free_sliders_from_spheres_still_settling():
     did not change over the last second slide freely; drift is the largest
     displacement / diameter, of all spheres and of the others; overlap the largest at
     any sample (pairs and box walls) / diameter."""
-    scene = pile_rest.pile(2, seed=1)
+    scene = box_pile(2, friction=0.0, seed=1)
     assert scene.n == 12 and np.allclose(scene.box_hi, (0.055, 0.055, 0.3))
     d = 2 * pile_rest.RADIUS
     x0 = np.array([[0.01, 0.01, 0.01], [0.04, 0.01, 0.01], [0.01, 0.04, 0.01]])

@@ -15,6 +15,7 @@ import taichi as ti
 
 import taichi_spheres as ts
 from taichi_spheres import observe
+from taichi_spheres.builders import box_pile
 from taichi_spheres.config import Tuning
 from taichi_spheres.reference import walton_impact
 
@@ -193,16 +194,9 @@ def test_friction_off_compiles_no_spin():
 
 
 def _pile(n_side=4, mu=0.5, mu_r=0.0, e=0.5, seed=3):
-    """n_side^2 x 3 spheres dropped from a jittered lattice into a small box."""
-    rng = np.random.default_rng(seed)
-    r = 0.01
-    g = np.arange(n_side) * 0.025 + 0.015
-    x = np.array([(a, b, c) for a in g for b in g for c in (0.02, 0.05, 0.08)], float)
-    x[:, :2] += rng.uniform(-2e-3, 2e-3, (len(x), 2))
-    v = rng.uniform(-0.2, 0.2, x.shape)
-    side = n_side * 0.025 + 0.005
-    return ts.Scene.from_arrays(x, v, r, box=((0, 0, 0), (side, side, 0.3)), restitution=e,
-                                wall_restitution=e, friction=mu, rolling_friction=mu_r)
+    """n_side^2 x 3 spheres dropped from a jittered lattice into a small box
+    (builders.box_pile)."""
+    return box_pile(n_side, friction=mu, rolling_friction=mu_r, restitution=e, seed=seed)
 
 
 @pytest.mark.parametrize("mu_r", [0.0, 0.1])

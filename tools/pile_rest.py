@@ -3,10 +3,10 @@
 friction? A pile at rest keeps every speed below 1e-6 m/s and does not drift over
 10 s; this measures what a frictionless pile does, in taichi_spheres and in LAMMPS.
 
-The pile: n_side x n_side x 3 spheres of r = 10 mm on a jittered lattice (spacing
-25 mm, 2 mm of horizontal jitter, random velocities up to 0.2 m/s per component),
-dropped into a box n_side x 25 + 5 mm wide that they fill about 1.6 layers deep
-(e = 0.5 between spheres and on the walls); ``--seeds`` fills. Runs, 1 thread, f64:
+The pile: taichi_spheres.builders.box_pile, n_side x n_side x 3 spheres of r = 10 mm
+on a jittered lattice dropped into a box they fill about 1.6 layers deep (e = 0.5
+between spheres and on the walls; the suite's pile is its seed 3); ``--seeds`` fills.
+Runs, 1 thread, f64:
 
 - taichi_spheres at the defaults, frictionless and with friction 0.5 and rolling
   friction 0.1 (the suite's test_box_filling_pile_settles_and_holds), and
@@ -45,6 +45,7 @@ sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, HERE)
 
 import taichi_spheres as ts  # noqa: E402
+from taichi_spheres.builders import PILE_RADIUS as RADIUS, box_pile  # noqa: E402
 from taichi_spheres.config import Tuning  # noqa: E402
 from machine import cpu_name, publish, untimed_pass  # noqa: E402  (tools/machine.py)
 import peer_lammps  # noqa: E402
@@ -57,21 +58,6 @@ REST_SPEED = 1e-6
 FREE = 1e-9
 #: how long a pile at rest holds without drift [s]
 HOLD = 10.0
-RADIUS = 0.01
-
-
-def pile(n_side: int, seed: int, mu: float = 0.0, mu_r: float = 0.0) -> ts.Scene:
-    """n_side^2 x 3 spheres dropped from a jittered lattice into a box they fill (the
-    module docstring; tests/test_friction.py's _pile, whose seed is 3)."""
-    rng = np.random.default_rng(seed)
-    g = np.arange(n_side) * 0.025 + 0.015
-    x = np.array([(a, b, c) for a in g for b in g for c in (0.02, 0.05, 0.08)], float)
-    x[:, :2] += rng.uniform(-2e-3, 2e-3, (len(x), 2))
-    v = rng.uniform(-0.2, 0.2, x.shape)
-    side = n_side * 0.025 + 0.005
-    return ts.Scene.from_arrays(x, v, RADIUS, box=((0, 0, 0), (side, side, 0.3)),
-                                restitution=0.5, wall_restitution=0.5, friction=mu,
-                                rolling_friction=mu_r)
 
 
 def sample_times(settle: float) -> list:
@@ -151,7 +137,7 @@ def measure(args) -> list:
         if code == "lammps" and args.no_lammps:
             continue
         for seed in args.seeds:
-            scene = pile(args.n_side, seed, mu, mu_r)
+            scene = box_pile(args.n_side, friction=mu, rolling_friction=mu_r, seed=seed)
             result = (run_taichi(scene, args.settle, tuning) if code == "taichi"
                       else run_lammps(scene, args.settle))
             print(f"{label}, seed {seed}: {result}", flush=True)
