@@ -163,7 +163,7 @@ def report(args, rows, argv) -> str:
         f"Measured {datetime.date.today().isoformat()} on {cpu_name()}, 1 thread each: `{cmd}`",
         "",
         f"{n} spheres of d = {2 * RADIUS * 1e3:g} mm dropped into a box "
-        f"{(args.n_side * 0.025 + 0.005) * 1e3:g} mm wide (e = 0.5), held from "
+        f"{box_pile(args.n_side).box_hi[0] * 1e3:g} mm wide (e = 0.5), held from "
         f"{args.settle:g} to {end:g} s; taichi_spheres at the defaults unless a row says "
         f"otherwise (f64); LAMMPS "
         f"frictionless Hertz, E = {YOUNG:g} Pa, nu = {POISSON}, dt = {DT:g} s. *Moving*: "
