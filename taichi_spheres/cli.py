@@ -53,14 +53,23 @@ TAICHI_BANNER_ENV = "ENABLE_TAICHI_HEADER_PRINT"
 
 
 
-def _stack_padded(frames) -> np.ndarray:
-    """(F, N, 3) stack of per-frame (n_f, 3) arrays; frames with fewer spheres (a sink
-    took some out) are padded with NaN rows."""
-    n = max(len(f) for f in frames)
-    out = np.full((len(frames), n, 3), np.nan, dtype=frames[0].dtype)
-    for k, f in enumerate(frames):
-        out[k, :len(f)] = f
+def _scene_rows(values, ids, n) -> np.ndarray:
+    """(n, 3) float32 rows in scene order: row ids[k] holds values[k]; NaN rows for the
+    spheres that are gone (a sink took them out)."""
+    out = np.full((n, 3), np.nan, dtype=np.float32)
+    out[np.asarray(ids)] = values
     return out
+
+
+def _kept_snapshots(path, frames) -> tuple:
+    """([x], [v], [time]) of the first ``frames`` frames of an earlier run's .npz at
+    ``path`` (a resumed run keeps them), empty lists where there is none."""
+    if not frames or not os.path.exists(path):
+        return [], [], []
+    with np.load(path) as old:
+        kept = min(frames, len(old["time"]))
+        return list(old["x"][:kept]), list(old["v"][:kept]), list(old["time"][:kept])
+
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Appends "(default: X)" to an option's help unless the help already states its
@@ -205,6 +214,17 @@ def _add_run_arguments(run):
 
 
 def main(argv=None):
+    """The ``taichi-spheres`` command; its exit status. Output piped into a reader that
+    stops early (``taichi-spheres info SCENE | head``) ends it quietly with status 1."""
+    try:
+        return _main(argv)
+    except BrokenPipeError:
+        # stdout is gone: point it at /dev/null so that Python's exit flush cannot fail
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_RUNS_FAILED
+
+
+def _main(argv):
     args = build_parser().parse_args(argv)
     os.environ.setdefault(TAICHI_BANNER_ENV, "0")
     if args.command == "plot":
@@ -499,7 +519,8 @@ class RunOutputs:
         self.video = VideoWriter(settings.video_path, settings.fps) if renderer else None
         self.diag = DiagnosticsWriter(settings.csv_path, scene.gravity, keep_frames=start_frame)
         self.trajectory, self.step_frames = _trajectory_outputs(settings, sim, start_frame)
-        self.snaps = ([], [], [])
+        self.snaps = _kept_snapshots(settings.npz_path, start_frame) if settings.npz \
+            else ([], [], [])
         self.render_seconds = 0.0
         self.start_frame = start_frame
 
@@ -518,8 +539,10 @@ class RunOutputs:
         with hold_interrupts():
             self.diag.write(frame, st, sim.stats)
             if self.settings.npz:
-                for store, value in zip(self.snaps, (st.x.astype(np.float32),
-                                                     st.v.astype(np.float32), st.time)):
+                n = self.scene.n
+                for store, value in zip(self.snaps, (_scene_rows(st.x, sim.sphere_ids, n),
+                                                     _scene_rows(st.v, sim.sphere_ids, n),
+                                                     st.time)):
                     store.append(value)
             if rgb is not None:
                 self.video.write(rgb)
@@ -549,8 +572,8 @@ class RunOutputs:
             if self.trajectory is not None:
                 self.trajectory.close()
             if s.npz and self.snaps[0]:
-                np.savez_compressed(s.npz_path, x=_stack_padded(self.snaps[0]),
-                                    v=_stack_padded(self.snaps[1]), time=np.array(self.snaps[2]),
+                np.savez_compressed(s.npz_path, x=np.stack(self.snaps[0]),
+                                    v=np.stack(self.snaps[1]), time=np.array(self.snaps[2]),
                                     radius=self.scene.radius, mass=self.scene.mass)
             if self.renderer is not None:
                 self.renderer.close()
@@ -558,7 +581,10 @@ class RunOutputs:
                                        (s.npz_path, s.npz and bool(self.snaps[0])),
                                        (s.trajectory, self.trajectory is not None),
                                        (s.ckpt_path, bool(s.checkpoint_every))) if on]
-            print(f"wrote {', '.join(written)} ({self.diag.rows} frames)", file=sys.stderr)
+            extra = f"; {self.trajectory.frames} trajectory frames" \
+                if self.step_frames is not None else ""
+            print(f"wrote {', '.join(written)} ({self.diag.rows} frames{extra})",
+                  file=sys.stderr)
 
 
 def _trajectory_outputs(settings: RunSettings, sim, start_frame):
@@ -613,7 +639,7 @@ def _run_frames(sim, outputs: RunOutputs, progress, settings, start_frame):
     try:
         outputs.copy_earlier_video()
         for frame in range(start_frame, settings.frames):
-            sim.advance_to(frame / settings.fps)
+            sim.advance_to(workload.frame_time(frame, settings.duration, settings.fps))
             outputs.write(frame, sim)
             progress.frame_done(frame, final=frame == settings.frames - 1)
     except KeyboardInterrupt:

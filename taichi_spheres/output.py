@@ -17,7 +17,7 @@ CSV_COLUMNS = ["frame", "time", "kinetic", "potential", "total", "px", "py", "pz
                "multi_collision_spheres", "collapse_collisions", "energy_pair_restitution",
                "energy_wall_restitution", "energy_collapse", "energy_contacts",
                "projected_pairs", "contacts", "contact_iterations", "discharged",
-               "discharged_mass", "rotational"]
+               "discharged_mass", "energy_discharged", "rotational"]
 #: CSV columns copied from Simulation.stats as they are
 _STATS_COLUMNS = CSV_COLUMNS[8:-1]
 
@@ -26,7 +26,7 @@ def check_writable(path: str) -> None:
     """Fail before simulating if ``path`` cannot be created (ValueError naming it)."""
     folder = os.path.dirname(os.path.abspath(path)) or "."
     if not os.path.isdir(folder):
-        raise ValueError(f"output folder does not exist: {folder}")
+        raise ValueError(f"output folder does not exist: {folder} (create it first)")
     if not os.access(folder, os.W_OK):
         raise ValueError(f"output folder is not writable: {folder}")
     if os.path.isdir(path):

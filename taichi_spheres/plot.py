@@ -2,7 +2,7 @@
 
 Three panels against simulated time [s]: the energies [J] (kinetic, potential, total,
 and the cumulative losses to pair restitution, wall restitution, the collapse rule and
-the contact solver);
+the contact solver, and the energy sinks took out);
 pair and wall collisions per simulated second (from the cumulative counts, per frame
 interval); the largest overlap left after a step so far, as a fraction of the contact
 distance. Needs matplotlib (the ``plot`` extra), imported only here, with the Agg
@@ -26,7 +26,10 @@ REQUIRED_COLUMNS = ("time", "kinetic", "potential", "total", "pair_collisions",
 LOSSES = (("energy_pair_restitution", "lost: pair restitution"),
           ("energy_wall_restitution", "lost: wall restitution"),
           ("energy_collapse", "lost: collapse rule"),
-          ("energy_contacts", "lost: contacts"))
+          ("energy_contacts", "lost: contacts"),
+          ("energy_discharged", "taken out at sinks"))
+#: columns read where the CSV has them (CSVs written before they existed lack them)
+OPTIONAL_COLUMNS = ("energy_discharged",)
 #: collision rates are averaged over at most this many intervals of equal frame count
 RATE_POINTS = 200
 #: figure size [inches] and resolution [dots per inch]
@@ -50,10 +53,11 @@ def read_diagnostics(path: str) -> dict:
             raise ValueError(f"{path} lacks the column(s) {', '.join(missing)}: is it the "
                              f"diagnostics CSV that 'taichi-spheres run' writes?")
         rows = list(reader)
+        present = [c for c in OPTIONAL_COLUMNS if c in (reader.fieldnames or [])]
     if not rows:
         raise ValueError(f"{path} has no rows (a run that wrote no frame)")
-    data = {}
-    for column in REQUIRED_COLUMNS:
+    data = {c: np.zeros(len(rows)) for c in OPTIONAL_COLUMNS}
+    for column in REQUIRED_COLUMNS + tuple(present):
         try:
             data[column] = np.array([float(row[column]) for row in rows])
         except (TypeError, ValueError):

@@ -18,7 +18,7 @@ from . import materials as mat
 __all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE", "RESTITUTION_MODELS", "MIN_STEP_ULPS",
            "OVERFLOW_HEADROOM", "largest_speed", "smallest_radius", "fall_speed",
            "speed_problem", "radius_problem", "mass_problem", "gravity_problem",
-           "vector_text"]
+           "vector_text", "check_state"]
 
 #: Pair restitution models: "normal" (default) and "smid" (the seed's rule).
 RESTITUTION_MODELS = ("normal", "smid")
@@ -532,6 +532,25 @@ def _inside_box(x, radius, lo, hi, periodic):
             i = bad[0]
             raise ValueError(f"sphere {i} (x={x[i].tolist()}, radius={radius[i]}) is outside "
                              f"{where}" + _more(bad))
+
+
+def check_state(x, v, omega, lo, hi, periodic) -> None:
+    """ValueError naming the first sphere whose position (N, 3) [m], velocity (N, 3)
+    [m/s] or spin (N, 3) [rad/s] is not finite, or whose centre lies outside the box
+    [lo, hi] (on a periodic axis outside [lo, hi)): the checks of a state given to
+    Simulation.set_state. Overlaps with neighbours or walls are not checked there: a
+    state the engine wrote may hold the small ones its steps leave."""
+    _finite_rows("x", x)
+    _finite_rows("v", v)
+    _finite_rows("omega", omega)
+    for a in range(3):
+        outside = x[:, a] >= hi[a] if periodic[a] else x[:, a] > hi[a]
+        bad = np.flatnonzero((x[:, a] < lo[a]) | outside)
+        if bad.size:
+            i = bad[0]
+            span = f"[{lo[a]}, {hi[a]})" if periodic[a] else f"[{lo[a]}, {hi[a]}]"
+            raise ValueError(f"sphere {i}: centre x={x[i].tolist()} lies outside the box "
+                             f"{span} on axis {'xyz'[a]}" + _more(bad))
 
 
 def _no_overlaps(x, radius, lo, hi, periodic):

@@ -446,6 +446,13 @@ def _check_values(box, physics, problems):
     value = _valid(physics, "max_sweeps", _PHYSICS)
     if value is not None and value < 1:
         problems.append(f"physics.max_sweeps: must be >= 1, got {value!r}")
+    for key, low, high in (("friction", 0, math.inf), ("wall_friction", 0, math.inf),
+                           ("rolling_friction", 0, math.inf),
+                           ("tangential_restitution", -1, 1)):
+        value = _valid(physics, key, _PHYSICS)
+        if value is not None and not (low <= value <= high and math.isfinite(value)):
+            limit = f"in [{low}, {high}]" if math.isfinite(high) else f">= {low} and finite"
+            problems.append(f"physics.{key}: must be {limit}, got {value!r}")
 
 
 def _origins(message, groups, arrays):

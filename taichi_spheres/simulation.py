@@ -32,7 +32,7 @@ from .contacts import near_allowance
 from .contacts.packed import packed_row_bytes, packs_rows
 from .grid import GridGeometry
 from . import discharge, observe, stepping
-from .scene import Scene
+from .scene import Scene, check_state
 from .state import Features, State
 
 __all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS", "rest_speed_for",
@@ -313,7 +313,8 @@ class Simulation:
         contact_iterations and position_iterations (velocity and split-impulse sweeps,
         summed), contact_residual (largest velocity change of a last sweep [m/s]),
         warm_starts_scaled (steps whose warm start it scaled down so that it would add
-        no energy: contacts/warm_energy.py); plus
+        no energy: contacts/warm_energy.py); substeps (the drift and impact substeps the
+        steps ran in: stepping.py); plus
         discharged, discharged_mass [kg], energy_discharged [J] (spheres that entered a
         sink: discharge.py); plus time and dt."""
         out = dict(self._totals)
@@ -353,14 +354,20 @@ class Simulation:
                      time=self.time, omega=self._engine.state.spins())
 
     def set_state(self, x, v, time=None, omega=None):
-        """Overwrite positions, velocities and spins (omega [rad/s]; None: zero) (e.g.
-        from a checkpoint); no validation beyond shapes, the caller owns the physics."""
+        """Overwrite positions x [m], velocities v [m/s] and spins omega [rad/s] (None:
+        zero), each (N, 3), and the time [s] if given (e.g. from a checkpoint).
+        ValueError for a wrong shape, a value that is not finite or a centre outside the
+        box, naming the sphere (scene.check_state). Overlaps are not checked: a state
+        the engine wrote may hold the small ones its steps leave."""
         self._check()
         x = np.asarray(x, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
         omega = np.zeros_like(v) if omega is None else np.asarray(omega, dtype=np.float64)
         if x.shape != (self.n, 3) or v.shape != (self.n, 3) or omega.shape != (self.n, 3):
             raise ValueError(f"x, v and omega must have shape ({self.n}, 3)")
+        if time is not None and not math.isfinite(float(time)):
+            raise ValueError(f"time must be finite, got {time!r}")
+        check_state(x, v, omega, self.scene.box_lo, self.scene.box_hi, self.scene.periodic)
         if time is not None:
             self.time = float(time)
         if self.n == 0:        # every sphere has left (a sink): nothing is bound

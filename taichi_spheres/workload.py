@@ -23,8 +23,9 @@ import numpy as np
 from .scene import (fall_speed, gravity_problem, mass_problem, radius_problem, speed_problem,
                     vector_text)
 
-__all__ = ["MAX_STEPS", "Workload", "estimate", "frame_count", "precision_problems",
-           "refusal", "model_step_seconds", "measure_step_seconds", "rough_duration"]
+__all__ = ["MAX_STEPS", "Workload", "estimate", "frame_count", "frame_time",
+           "precision_problems", "refusal", "model_step_seconds", "measure_step_seconds",
+           "rough_duration"]
 
 #: Estimated steps above which ``taichi-spheres run`` refuses to start unless given
 #: --force. No real scene comes near it: the bundled scenes need 10^3 to 10^5 steps for
@@ -33,6 +34,9 @@ __all__ = ["MAX_STEPS", "Workload", "estimate", "frame_count", "precision_proble
 #: mostly slips of units or typos: a speed of 1e300 m/s, gravity of -1e12 m/s^2, a
 #: radius in metres that was meant in millimetres, fps = 1e9.
 MAX_STEPS = 10**7
+#: A run refused at MAX_STEPS whose rate would fit this many simulated seconds [s] under
+#: the limit is refused for its duration (refusal), not for its speeds or frames.
+LONG_RUN_SECONDS = 10.0
 #: time samples of the speed bound when summing 1/h over a run
 ESTIMATE_SAMPLES = 1024
 #: Seconds a step takes on the reference machine (2-core x86-64 CPU, f64, fast compile,
@@ -90,8 +94,28 @@ class Workload:
 
 
 def frame_count(duration: float, fps: float) -> int:
-    """Frames of a run of ``duration`` [s] at ``fps``, both ends included."""
-    return int(math.floor(duration * fps + 1e-9)) + 1
+    """Frames of a run of ``duration`` [s] at ``fps``, both ends included: t = k / fps
+    up to the duration, and one more at t = duration where the duration is not a whole
+    number of frame intervals (frame_time)."""
+    whole = _whole_frames(duration, fps)
+    return whole + 1 + (1 if _off_grid(duration, fps, whole) else 0)
+
+
+def frame_time(frame: int, duration: float, fps: float) -> float:
+    """The time [s] of frame ``frame`` (from 0) of a run of ``duration`` [s] at ``fps``:
+    frame / fps, the last frame of a duration off the frame grid at the duration."""
+    return min(frame / fps, duration)
+
+
+def _whole_frames(duration: float, fps: float) -> int:
+    """Whole frame intervals in the duration (a product within 1e-9 of an integer counts
+    as that integer)."""
+    return int(math.floor(duration * fps + 1e-9))
+
+
+def _off_grid(duration: float, fps: float, whole: int) -> bool:
+    """The duration ends between frame times (beyond the rounding frame_count allows)."""
+    return duration * fps - whole > 1e-9
 
 
 def estimate(scene, duration: float, fps: float, step_fraction: float) -> Workload:
@@ -139,7 +163,12 @@ def refusal(work: Workload) -> str | None:
     """Why a run of this work is refused (above MAX_STEPS) and what to change, or None."""
     if work.steps <= MAX_STEPS:
         return None
-    if work.by_frames:
+    per_second = work.steps / work.duration if work.duration > 0 else math.inf
+    if per_second * LONG_RUN_SECONDS <= MAX_STEPS:
+        cause = (f"it lasts {work.duration:g} s of simulated time, at about "
+                 f"{per_second:.1e} steps per simulated second",
+                 "check that [run] duration is in simulated seconds")
+    elif work.by_frames:
         cause = (f"{work.frames} frames ([run] fps x duration), and every frame ends a step",
                  "lower [run] fps (or --fps)")
     elif work.by_gravity:
@@ -190,13 +219,16 @@ def measure_step_seconds(sim, frame_dt: float, max_steps: float) -> tuple:
 
 
 def _steady_step_seconds(sim, frame_dt, max_steps, start):
+    """Seconds per step of the fastest batch once batches stop getting faster, after
+    about ``max_steps`` steps (but at least two batches: the first compiles kernels,
+    a resumed run's too) or CALIBRATION_MAX_SECONDS."""
     previous, done = math.inf, 0
     while True:
         per_step, steps = _time_batch(sim, frame_dt, start)
         done += steps
         settled = per_step * CALIBRATION_STEADY_RATIO >= previous
-        if settled or done >= max_steps or \
-                time.perf_counter() - start >= CALIBRATION_MAX_SECONDS:
+        enough = done >= max_steps and previous < math.inf
+        if settled or enough or time.perf_counter() - start >= CALIBRATION_MAX_SECONDS:
             return min(per_step, previous)
         previous = per_step
 

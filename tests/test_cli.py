@@ -110,13 +110,14 @@ def test_resume_gives_identical_results(tiny_run):
     d, _ = tiny_run
     # an interrupted run: stop at 0.3 s with checkpoints every 4 frames (frame 3 = 0.15 s)
     r = cli("run", "tiny.toml", "-o", "part.mp4", "--duration", "0.3", "--checkpoint-every",
-            "4", cwd=d)
+            "4", "--npz", cwd=d)
     assert r.returncode == 0, r.stderr
     r = cli("run", "tiny.toml", "-o", "part.mp4", "--resume", "part.ckpt.npz", "--npz", cwd=d)
     assert r.returncode == 0, r.stderr
     full, part = read_csv(d / "full.csv"), read_csv(d / "part.csv")
     assert full == part
-    np.testing.assert_array_equal(np.load(d / "full.npz")["x"][-1], np.load(d / "part.npz")["x"][-1])
+    for key in ("x", "v", "time"):      # the frames before the checkpoint are kept
+        np.testing.assert_array_equal(np.load(d / "full.npz")[key], np.load(d / "part.npz")[key])
     import imageio.v2 as imageio
     assert imageio.get_reader(str(d / "part.mp4")).count_frames() == 11
 
@@ -195,6 +196,80 @@ def test_unwritable_output_fails_before_simulating(tmp_path):
     (tmp_path / "ok.toml").write_text("[[spheres]]\nx = [0.5, 0.5, 0.5]\nradius = 0.1\n")
     r = cli("run", "ok.toml", "-o", "no/such/dir/x.mp4", cwd=tmp_path, timeout=120)
     assert r.returncode == 2 and "does not exist" in r.stderr
+
+
+def test_duration_between_frames_ends_with_a_frame_at_the_duration(tmp_path):
+    """A duration that is not a whole number of frame intervals is run to its end: the
+    frames fall on k / fps, and the last one on the duration itself."""
+    (tmp_path / "tiny.toml").write_text(TINY)
+    r = cli("run", "tiny.toml", "-o", "x.mp4", "--no-video", "--duration", "0.52", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    times = [float(row["time"]) for row in read_csv(tmp_path / "x.csv")]
+    assert times == [k / 20 for k in range(11)] + [0.52]
+    assert "(12 frames)" in r.stderr and "for 0.52 s simulated" in r.stderr
+    r = cli("run", "tiny.toml", "-o", "y.mp4", "--no-video", "--duration", "0.02", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert [float(row["time"]) for row in read_csv(tmp_path / "y.csv")] == [0.0, 0.02]
+
+
+SINK = """
+name = "sink"
+[physics]
+gravity = [0.0, 0.0, -9.81]
+restitution = 0.5
+[box]
+hi = [0.1, 0.1, 0.2]
+[run]
+duration = 0.3
+fps = 20
+[[plane]]
+point = [0.05, 0.05, 0.05]
+normal = [0.0, 0.0, 1.0]
+hole = 0.02
+[[sink]]
+low = [0.0, 0.0, 0.0]
+high = [0.1, 0.1, 0.03]
+[[lattice]]
+lo = [0.03, 0.03, 0.06]
+hi = [0.07, 0.07, 0.12]
+spacing = 0.011
+radius = 0.005
+"""
+
+
+def test_snapshots_and_csv_of_a_scene_with_a_sink(tmp_path):
+    """The .npz keeps the scene's sphere order (NaN rows for the spheres a sink took
+    out), and the CSV books the energy they took: total plus every energy_* column stays
+    at its first value."""
+    import taichi_spheres as ts
+    (tmp_path / "sink.toml").write_text(SINK)
+    r = cli("run", "sink.toml", "-o", "s.mp4", "--no-video", "--npz", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    rows, snap = read_csv(tmp_path / "s.csv"), np.load(tmp_path / "s.npz")
+    n = len(snap["radius"])
+    gone = [int(row["discharged"]) for row in rows]
+    assert gone[-1] > 0
+    assert snap["x"].shape == (len(rows), n, 3)
+    assert [int(np.isnan(x[:, 0]).sum()) for x in snap["x"]] == gone
+    books = [float(row["total"]) + sum(float(row[c]) for c in row if c.startswith("energy_"))
+             for row in rows]
+    assert float(rows[-1]["energy_discharged"]) > 0
+    np.testing.assert_allclose(books, books[0], rtol=1e-9)
+    sim = ts.Simulation(ts.load_scene(str(tmp_path / "sink.toml")), arch="cpu")
+    for k in range(len(rows)):
+        sim.advance_to(k / 20)
+    np.testing.assert_allclose(snap["x"][-1][sim.sphere_ids], sim.state().x, rtol=0, atol=1e-6)
+
+
+def test_output_cut_short_by_its_reader_ends_quietly(tmp_path):
+    """taichi-spheres info SCENE | head: no traceback when the reader stops early."""
+    (tmp_path / "tiny.toml").write_text(TINY)
+    p = subprocess.Popen([sys.executable, "-m", "taichi_spheres.cli", "info", "tiny.toml"],
+                         cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()                     # the reader is gone before the first line
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 1
+    assert "Traceback" not in err and "BrokenPipe" not in err
 
 
 def test_info_lists_compiled_features(tmp_path):
@@ -394,6 +469,7 @@ def test_trajectory_every_n_steps(gsd_run):
     steps = [s for s, _, _ in gsd_frames(gsd_run / "every.gsd")]
     last = int(read_csv(gsd_run / "full.csv")[-1]["steps"])
     assert steps == list(range(0, last + 1, 25))
+    assert f"(11 frames; {len(steps)} trajectory frames)" in r.stderr
     assert read_csv(gsd_run / "every.csv") == read_csv(gsd_run / "full.csv")
 
 

@@ -284,6 +284,32 @@ def test_bad_simulation_arguments(arch):
         ts.Simulation(tiny, arch=arch)
 
 
+@pytest.mark.parametrize("periodic", [False, True])
+def test_set_state_refuses_what_no_state_can_hold(arch, periodic):
+    """set_state names the sphere whose position, velocity or spin is not finite or
+    whose centre lies outside the box, and changes nothing then."""
+    x = np.array([[0.3, 0.5, 0.5], [0.7, 0.5, 0.5]])
+    scene = ts.Scene.from_arrays(x, np.zeros((2, 3)), 0.1, periodic=(periodic,) * 3)
+    sim = ts.Simulation(scene, arch=arch)
+    v = np.zeros((2, 3))
+    cases = [(dict(x=np.array([[0.3, 0.5, 0.5], [np.nan, 0.5, 0.5]])), "x of sphere 1"),
+             (dict(v=np.array([[0.0, 0.0, 0.0], [np.inf, 0.0, 0.0]])), "v of sphere 1"),
+             (dict(omega=np.array([[np.nan, 0.0, 0.0], [0.0, 0.0, 0.0]])), "omega of sphere 0"),
+             (dict(x=np.array([[5.0, 0.5, 0.5], [0.7, 0.5, 0.5]])), "sphere 0: centre"),
+             (dict(x=np.array([[0.3, 0.5, 1.0], [0.7, 0.5, 0.5]])),
+              "sphere 0: centre" if periodic else None),
+             (dict(time=float("nan")), "time must be finite")]
+    for change, words in cases:
+        given = dict(x=x, v=v, omega=None, time=None) | change
+        if words is None:          # a centre on the closed wall: allowed
+            sim.set_state(**given)
+            continue
+        with pytest.raises(ValueError, match=words):
+            sim.set_state(**given)
+    sim.set_state(x, v, time=0.0)
+    np.testing.assert_array_equal(sim.state().x, x)
+
+
 def test_parallel_colour_launches_give_the_serial_bits(arch, monkeypatch):
     """The CPU resolves few pending pairs in one serial loop over the colours and many
     (above Performance.serial_resolve_pairs) with one parallel launch per colour, as a GPU

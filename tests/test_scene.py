@@ -723,6 +723,25 @@ def test_value_ranges_reported_together(tmp_path):
     ]
 
 
+def test_friction_ranges_name_their_keys(tmp_path):
+    problems, _ = load_problems(tmp_path, """
+        [physics]
+        friction = -0.3
+        wall_friction = -2.0
+        rolling_friction = -1.0
+        tangential_restitution = 1.5
+        [[spheres]]
+        x = [0.5, 0.5, 0.5]
+        radius = 0.1
+    """)
+    assert problems == [
+        "physics.friction: must be >= 0 and finite, got -0.3",
+        "physics.wall_friction: must be >= 0 and finite, got -2.0",
+        "physics.rolling_friction: must be >= 0 and finite, got -1.0",
+        "physics.tangential_restitution: must be in [-1, 1], got 1.5",
+    ]
+
+
 def test_no_spheres(tmp_path):
     problems, _ = load_problems(tmp_path, "[box]\nhi = [1.0, 1.0, 1.0]\n")
     assert problems == ["no spheres: add [[spheres]], [[lattice]], [[random]] or [[pour]] "

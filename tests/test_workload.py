@@ -61,6 +61,17 @@ def test_refusal_names_gravity_the_sphere_or_the_frames():
     assert "sphere 0 moves at 1e+08 m/s" in workload.refusal(fast)
     frames = workload.estimate(one_sphere(), 1.0, 1e9, 0.1)
     assert frames.by_frames and "fps" in workload.refusal(frames)
+    long = workload.estimate(one_sphere(v=(0, 0, 0), gravity=(0, 0, -9.81)), 1e9, 30, 0.1)
+    text = workload.refusal(long)
+    assert "it lasts 1e+09 s of simulated time" in text and "gravity" not in text
+
+
+def test_frames_fall_on_the_frame_grid_and_on_the_duration():
+    assert workload.frame_count(0.5, 20) == 11             # t = 0, 0.05, ..., 0.5
+    assert workload.frame_count(0.3 * 3, 10) == 10         # 0.9 within round-off of 9 frames
+    assert workload.frame_count(0.52, 20) == 12            # ..., 0.5, then 0.52
+    assert workload.frame_count(0.02, 20) == 2
+    assert [workload.frame_time(k, 0.52, 20) for k in (0, 10, 11)] == [0.0, 0.5, 0.52]
 
 
 def test_precision_problems_name_the_sphere_or_gravity():
