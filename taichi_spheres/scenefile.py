@@ -242,7 +242,8 @@ def _scene_from_groups(groups, arrays, box, physics, data, meta, source) -> Scen
             box=(lo, hi), periodic=box.get("periodic", [False, False, False]),
             **_physics_args(box, physics, data), **_material_args(data, arrays))
     except ValueError as exc:
-        raise SceneFileError(source, [str(exc) + _origins(str(exc), groups, arrays)]) from None
+        message = _table_names(str(exc), data.get("_shapes", {}))
+        raise SceneFileError(source, [message + _origins(message, groups, arrays)]) from None
     colours = np.array([item.get("colour", [-1.0, -1.0, -1.0]) for _, _, item in groups],
                        dtype=np.float64)
     meta.update(groups=np.concatenate(arrays["group"]), group_colours=colours,
@@ -453,6 +454,23 @@ def _check_values(box, physics, problems):
         if value is not None and not (low <= value <= high and math.isfinite(value)):
             limit = f"in [{low}, {high}]" if math.isfinite(high) else f">= {low} and finite"
             problems.append(f"physics.{key}: must be {limit}, got {value!r}")
+
+
+def _table_names(message, shapes) -> str:
+    """A Scene error with its geometry and sinks named by the file's tables:
+    "geometry[2] (Cylinder)" -> "cylinder[0]", "sinks[1]" -> "sink[1]" (the geometry
+    list holds the planes, then the cylinders, then the cones: geometry_tables)."""
+    names, seen = [], {}
+    for obj in shapes.get("geometry", ()):
+        kind = type(obj).__name__
+        names.append(f"{kind.lower()}[{seen.get(kind, 0)}]")
+        seen[kind] = seen.get(kind, 0) + 1
+
+    def table(m):
+        k = int(m.group(1))
+        return names[k] if k < len(names) else m.group(0)
+    message = re.sub(r"\bgeometry\[(\d+)\] \(\w+\)", table, message)
+    return re.sub(r"\bsinks\[(\d+)\]", r"sink[\1]", message)
 
 
 def _origins(message, groups, arrays):

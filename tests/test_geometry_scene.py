@@ -272,6 +272,19 @@ def test_file_cylinder_keys_checked_and_problems_reported_together(tmp_path):
     assert "cone[0]: Cone: radius_at_point and radius_at_end must not both be 0" in problems
 
 
+def test_file_errors_name_the_geometry_and_sink_tables(tmp_path):
+    """Scene errors about geometry or sinks name the file's tables (cylinder[0],
+    sink[1]), not the Python API's geometry list."""
+    plane = _table("plane", point=[0.05, 0.05, 0.02], normal=AXIS_Z)
+    cylinder = _table("cylinder", point=CENTRE, axis=AXIS_Z, radius=0.02, length=0.05)
+    with pytest.raises(SceneFileError, match=r"sphere 0 starts inside cylinder\[0\]: gap"):
+        _load(tmp_path, plane, cylinder, _table("spheres", x=[0.069, 0.05, 0.05], radius=0.005))
+    sinks = _table("sink", low=[0.0, 0.0, 0.0], high=[0.1, 0.1, 0.01]) + \
+        _table("sink", low=[2.0, 2.0, 2.0], high=[3.0, 3.0, 3.0])
+    with pytest.raises(SceneFileError, match=r"sink\[1\] \(\[2.0, 2.0, 2.0\]"):
+        _load(tmp_path, sinks, _table("spheres", **TOP_SPHERE))
+
+
 def test_file_omega_of_every_sphere_table(tmp_path):
     regions = {"lattice": dict(lo=[0.0, 0.0, 0.0], hi=[0.1, 0.02, 0.02]),
                "random": dict(count=3, lo=[0.0, 0.0, 0.05], hi=[0.1, 0.1, 0.1]),
@@ -325,7 +338,7 @@ def test_random_region_inside_geometry_is_named(tmp_path):
 
 
 def test_file_lattice_inside_geometry_names_the_sphere(tmp_path):
-    with pytest.raises(SceneFileError, match="starts inside geometry\\[1\\] \\(Cylinder\\)"
+    with pytest.raises(SceneFileError, match="starts inside cylinder\\[0\\]: gap"
                                              ".*lattice\\[0\\] #"):
         _load(tmp_path, SILO, _table("spheres", **TOP_SPHERE),
               _table("lattice", lo=[0.0, 0.0, 0.06], hi=[0.1, 0.1, 0.1], radius=0.005))
