@@ -194,6 +194,8 @@ def _add_run_arguments(run):
     run.add_argument("--resume", default=None, metavar="CHECKPOINT",
                      help="continue a run from its OUT.ckpt.npz; the result is bit-identical "
                           "to an uninterrupted run with the same options")
+    run.add_argument("--threads", type=_positive(int), default=None,
+                     help="Taichi CPU threads (default: Taichi's, all cores)")
     run.add_argument("--fused", action="store_true",
                      help="run each step as one fused kernel (CPU, below 3,000 spheres): "
                           "faster steps after a one-off compile of 10-60 s; same results")
@@ -456,10 +458,11 @@ def _start_simulation(scene: Scene, settings: RunSettings, args):
     precision = _precision(scene, args.precision, args.arch)
     work = check_work(scene, precision, settings.duration, settings.fps,
                       settings.step_fraction, force=args.force)
-    runtime.ensure(args.arch, precision, compile=compile_mode(args.compile, scene.n))
+    runtime.ensure(args.arch, precision, args.threads,
+                   compile=compile_mode(args.compile, scene.n))
     sim = Simulation(scene, arch=args.arch, precision=precision,
                      step_fraction=settings.step_fraction, max_sweeps=settings.max_sweeps,
-                     fused=args.fused)
+                     fused=args.fused, threads=args.threads)
     start_frame = 0
     if args.resume:
         start_frame = checkpoint.load(args.resume, sim, scene, settings.fps) + 1

@@ -129,6 +129,15 @@ def test_resume_refuses_another_scene(tiny_run):
     assert r.returncode == 2 and "different scene" in r.stderr
 
 
+def test_one_thread_writes_the_same_diagnostics(tiny_run):
+    """--threads 1 changes the speed, not the numbers."""
+    d, _ = tiny_run
+    r = cli("run", "tiny.toml", "-o", "one.mp4", "--no-video", "--threads", "1", "--quiet",
+            cwd=d)
+    assert r.returncode == 0, r.stderr
+    assert read_csv(d / "one.csv") == read_csv(d / "full.csv")
+
+
 def test_fused_run_writes_the_same_diagnostics(tiny_run):
     """--fused (one kernel per step on the CPU) changes the speed, not the numbers."""
     d, _ = tiny_run
