@@ -63,12 +63,12 @@ def _scene_rows(values, ids, n) -> np.ndarray:
 
 def _kept_snapshots(path, frames) -> tuple:
     """([x], [v], [time]) of the first ``frames`` frames of an earlier run's .npz at
-    ``path`` (a resumed run keeps them), empty lists where there is none."""
-    if not frames or not os.path.exists(path):
+    ``path`` (a resumed run keeps them; _check_kept_snapshots checked them), empty
+    lists for a run from the start."""
+    if not frames:
         return [], [], []
     with np.load(path) as old:
-        kept = min(frames, len(old["time"]))
-        return list(old["x"][:kept]), list(old["v"][:kept]), list(old["time"][:kept])
+        return list(old["x"][:frames]), list(old["v"][:frames]), list(old["time"][:frames])
 
 
 class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
@@ -465,8 +465,47 @@ def _start_simulation(scene: Scene, settings: RunSettings, args):
                      fused=args.fused, threads=args.threads)
     start_frame = 0
     if args.resume:
-        start_frame = checkpoint.load(args.resume, sim, scene, settings.fps) + 1
+        frame = checkpoint.load(args.resume, sim, scene, settings.fps)
+        _check_resumed_frame(args.resume, frame, sim.time, settings)
+        start_frame = frame + 1
+        if settings.npz:
+            _check_kept_snapshots(settings.npz_path, start_frame, scene.n, settings)
     return sim, start_frame, work
+
+
+def _check_resumed_frame(path, frame, time_, settings: RunSettings) -> None:
+    """ValueError unless checkpoint ``path``'s frame, taken at ``time_`` [s], is a frame
+    of this run before its last, at that time (a checkpoint on the extra last frame of
+    a duration off the frame grid is not a frame of a longer run)."""
+    if frame + 1 >= settings.frames:
+        raise ValueError(f"checkpoint {path} was taken at frame {frame} (t = {time_:g} s), "
+                         f"at or after the end of this run ({settings.frames} frames over "
+                         f"{settings.duration:g} s): nothing is left to run")
+    expected = workload.frame_time(frame, settings.duration, settings.fps)
+    if time_ != expected:
+        raise ValueError(f"checkpoint {path} was taken at t = {time_:.17g} s, not at frame "
+                         f"{frame} of this run (t = {expected:.17g} s at {settings.fps:g} "
+                         f"fps): resume with the duration of the run that wrote it")
+
+
+def _check_kept_snapshots(path, frames, n, settings: RunSettings) -> None:
+    """ValueError unless ``path`` holds the first ``frames`` frames of this run's
+    snapshots (n spheres each, at this run's frame times), which a resumed --npz run
+    keeps."""
+    hint = "resume without --npz, or start the run again"
+    if not os.path.exists(path):
+        raise ValueError(f"--npz: {path} does not exist, so the frames before the "
+                         f"checkpoint cannot be kept: {hint}")
+    try:
+        with np.load(path) as old:
+            shape, times = old["x"].shape, np.array(old["time"][:frames])
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(f"--npz: cannot read {path}: {exc}") from None
+    want = [workload.frame_time(k, settings.duration, settings.fps) for k in range(frames)]
+    if len(shape) != 3 or shape[1] != n or len(times) < frames or \
+            not np.array_equal(times, np.array(want, dtype=times.dtype)):
+        raise ValueError(f"--npz: {path} does not hold this run's first {frames} frames of "
+                         f"{n} spheres: {hint}")
 
 
 def _make_renderer(scene: Scene, settings: RunSettings):

@@ -66,13 +66,16 @@ class DiagnosticsWriter:
     """One CSV row per frame: energies [J], momentum [kg m/s], cumulative counters."""
 
     def __init__(self, path: str, gravity, keep_frames: int = 0):
-        """keep_frames > 0 (resuming): keep the first keep_frames rows of an existing file."""
+        """keep_frames > 0 (resuming): keep the first keep_frames rows of an existing file,
+        each value under its own column (nan in a column the file lacks: a CSV written
+        before the column existed)."""
         self.path = path
         self.gravity = np.asarray(gravity, dtype=np.float64)
         kept = []
         if keep_frames and os.path.exists(path):
             with open(path, newline="") as fh:
-                kept = [row for row in csv.reader(fh)][1:keep_frames + 1]
+                rows = list(csv.DictReader(fh))[:keep_frames]
+            kept = [[row.get(c, "nan") for c in CSV_COLUMNS] for row in rows]
         self._fh = open(path, "w", newline="")
         self._csv = csv.writer(self._fh)
         self._csv.writerow(CSV_COLUMNS)

@@ -41,7 +41,8 @@ class PlotUnavailable(RuntimeError):
 
 
 def read_diagnostics(path: str) -> dict:
-    """The REQUIRED_COLUMNS of a diagnostics CSV as float arrays; ValueError naming the
+    """The REQUIRED_COLUMNS of a diagnostics CSV as float arrays, and the
+    OPTIONAL_COLUMNS (zeros where the CSV lacks them); ValueError naming the
     file and what is wrong (missing, not a CSV of ``taichi-spheres run``, no rows, a
     value that is not a number)."""
     if not os.path.isfile(path):

@@ -18,8 +18,15 @@ from . import materials as mat
 __all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE", "RESTITUTION_MODELS", "MIN_STEP_ULPS",
            "OVERFLOW_HEADROOM", "largest_speed", "smallest_radius", "fall_speed",
            "speed_problem", "radius_problem", "mass_problem", "gravity_problem",
-           "vector_text", "check_state"]
+           "vector_text", "check_state", "FRICTION_RANGES", "PERIODIC_SLACK"]
 
+#: Simulation.set_state accepts a centre this far outside a periodic axis's [lo, hi),
+#: relative to the largest of |lo|, |hi| and the box's extent: the engine's wrap x +- L
+#: in f32 can round onto hi or an ulp below lo, and its next step wraps it back.
+PERIODIC_SLACK = 4.0 * 2.0 ** -23
+#: (low, high) of each friction coefficient of a scene (high inf: finite).
+FRICTION_RANGES = {"friction": (0.0, math.inf), "wall_friction": (0.0, math.inf),
+                   "tangential_restitution": (-1.0, 1.0), "rolling_friction": (0.0, math.inf)}
 #: Pair restitution models: "normal" (default) and "smid" (the seed's rule).
 RESTITUTION_MODELS = ("normal", "smid")
 
@@ -310,13 +317,15 @@ def _coefficient(name, value, low=0.0, high=math.inf) -> float:
 
 def _friction(friction, wall_friction, beta0, rolling) -> dict:
     """Checked friction, wall_friction (None: = friction), tangential_restitution and
-    rolling_friction."""
-    mu = _coefficient("friction", friction)
+    rolling_friction (FRICTION_RANGES)."""
+    mu = _coefficient("friction", friction, *FRICTION_RANGES["friction"])
     return dict(friction=mu,
                 wall_friction=mu if wall_friction is None else
-                _coefficient("wall_friction", wall_friction),
-                tangential_restitution=_coefficient("tangential_restitution", beta0, -1.0, 1.0),
-                rolling_friction=_coefficient("rolling_friction", rolling))
+                _coefficient("wall_friction", wall_friction, *FRICTION_RANGES["wall_friction"]),
+                tangential_restitution=_coefficient(
+                    "tangential_restitution", beta0, *FRICTION_RANGES["tangential_restitution"]),
+                rolling_friction=_coefficient("rolling_friction", rolling,
+                                              *FRICTION_RANGES["rolling_friction"]))
 
 
 def _materials(material, materials, pairs, n) -> dict:
@@ -534,23 +543,28 @@ def _inside_box(x, radius, lo, hi, periodic):
                              f"{where}" + _more(bad))
 
 
-def check_state(x, v, omega, lo, hi, periodic) -> None:
+def check_state(x, v, omega, lo, hi, periodic, ids=None) -> None:
     """ValueError naming the first sphere whose position (N, 3) [m], velocity (N, 3)
     [m/s] or spin (N, 3) [rad/s] is not finite, or whose centre lies outside the box
-    [lo, hi] (on a periodic axis outside [lo, hi)): the checks of a state given to
-    Simulation.set_state. Overlaps with neighbours or walls are not checked there: a
-    state the engine wrote may hold the small ones its steps leave."""
-    _finite_rows("x", x)
-    _finite_rows("v", v)
-    _finite_rows("omega", omega)
+    [lo, hi] (on a periodic axis by more than PERIODIC_SLACK of the box's extent): the
+    checks of a state given to Simulation.set_state; ``ids`` (N,): the scene numbers
+    of the rows, named in the message (default: the row numbers). Overlaps with
+    neighbours or walls are not checked: a state the engine wrote may hold the small
+    ones its steps leave."""
+    ids = np.arange(len(x)) if ids is None else np.asarray(ids)
+    for name, arr in (("x", x), ("v", v), ("omega", omega)):
+        bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
+        if bad.size:
+            raise ValueError(f"{name} of sphere {ids[bad[0]]} is not finite "
+                             f"({arr[bad[0]].tolist()})" + _more(bad))
     for a in range(3):
-        outside = x[:, a] >= hi[a] if periodic[a] else x[:, a] > hi[a]
-        bad = np.flatnonzero((x[:, a] < lo[a]) | outside)
+        slack = PERIODIC_SLACK * max(abs(lo[a]), abs(hi[a]), hi[a] - lo[a]) \
+            if periodic[a] else 0.0
+        bad = np.flatnonzero((x[:, a] < lo[a] - slack) | (x[:, a] > hi[a] + slack))
         if bad.size:
             i = bad[0]
-            span = f"[{lo[a]}, {hi[a]})" if periodic[a] else f"[{lo[a]}, {hi[a]}]"
-            raise ValueError(f"sphere {i}: centre x={x[i].tolist()} lies outside the box "
-                             f"{span} on axis {'xyz'[a]}" + _more(bad))
+            raise ValueError(f"sphere {ids[i]}: centre x={x[i].tolist()} lies outside the "
+                             f"box [{lo[a]}, {hi[a]}] on axis {'xyz'[a]}" + _more(bad))
 
 
 def _no_overlaps(x, radius, lo, hi, periodic):

@@ -51,7 +51,7 @@ except ImportError:  # Python 3.10
 
 import numpy as np
 
-from .scene import DEFAULT_DENSITY, RESTITUTION_MODELS, Scene
+from .scene import DEFAULT_DENSITY, FRICTION_RANGES, RESTITUTION_MODELS, Scene
 from .scenegeometry import geometry_tables, table_items
 from .scenematerials import DEFAULT_MATERIAL, material_index, material_tables
 
@@ -447,12 +447,11 @@ def _check_values(box, physics, problems):
     value = _valid(physics, "max_sweeps", _PHYSICS)
     if value is not None and value < 1:
         problems.append(f"physics.max_sweeps: must be >= 1, got {value!r}")
-    for key, low, high in (("friction", 0, math.inf), ("wall_friction", 0, math.inf),
-                           ("rolling_friction", 0, math.inf),
-                           ("tangential_restitution", -1, 1)):
+    for key, (low, high) in FRICTION_RANGES.items():
         value = _valid(physics, key, _PHYSICS)
         if value is not None and not (low <= value <= high and math.isfinite(value)):
-            limit = f"in [{low}, {high}]" if math.isfinite(high) else f">= {low} and finite"
+            limit = f"in [{low:g}, {high:g}]" if math.isfinite(high) else \
+                f">= {low:g} and finite"
             problems.append(f"physics.{key}: must be {limit}, got {value!r}")
 
 

@@ -367,7 +367,8 @@ class Simulation:
             raise ValueError(f"x, v and omega must have shape ({self.n}, 3)")
         if time is not None and not math.isfinite(float(time)):
             raise ValueError(f"time must be finite, got {time!r}")
-        check_state(x, v, omega, self.scene.box_lo, self.scene.box_hi, self.scene.periodic)
+        check_state(x, v, omega, self.scene.box_lo, self.scene.box_hi, self.scene.periodic,
+                    self.sphere_ids)
         if time is not None:
             self.time = float(time)
         if self.n == 0:        # every sphere has left (a sink): nothing is bound

@@ -164,13 +164,13 @@ def refusal(work: Workload) -> str | None:
     if work.steps <= MAX_STEPS:
         return None
     per_second = work.steps / work.duration if work.duration > 0 else math.inf
-    if per_second * LONG_RUN_SECONDS <= MAX_STEPS:
+    if work.by_frames:
+        cause = (f"{work.frames} frames ([run] fps x duration), and every frame ends a step",
+                 "lower [run] fps (or --fps)")
+    elif per_second * LONG_RUN_SECONDS <= MAX_STEPS:
         cause = (f"it lasts {work.duration:g} s of simulated time, at about "
                  f"{per_second:.1e} steps per simulated second",
                  "check that [run] duration is in simulated seconds")
-    elif work.by_frames:
-        cause = (f"{work.frames} frames ([run] fps x duration), and every frame ends a step",
-                 "lower [run] fps (or --fps)")
     elif work.by_gravity:
         cause = (f"gravity {vector_text(work.gravity)} m/s^2 speeds spheres up to "
                  f"{work.v_top:.2g} m/s within {work.duration:g} s",
@@ -219,17 +219,21 @@ def measure_step_seconds(sim, frame_dt: float, max_steps: float) -> tuple:
 
 
 def _steady_step_seconds(sim, frame_dt, max_steps, start):
-    """Seconds per step of the fastest batch once batches stop getting faster, after
-    about ``max_steps`` steps (but at least two batches: the first compiles kernels,
-    a resumed run's too) or CALIBRATION_MAX_SECONDS."""
-    previous, done = math.inf, 0
+    """Seconds per step of the faster of the last two batches once batches stop getting
+    faster, after about ``max_steps`` steps, or CALIBRATION_MAX_SECONDS after the first
+    batch; at least two batches (the first compiles the kernels, a resumed run's too)."""
+    previous, done, clock = math.inf, 0, start
     while True:
-        per_step, steps = _time_batch(sim, frame_dt, start)
+        per_step, steps = _time_batch(sim, frame_dt, clock)
         done += steps
         settled = per_step * CALIBRATION_STEADY_RATIO >= previous
-        enough = done >= max_steps and previous < math.inf
-        if settled or enough or time.perf_counter() - start >= CALIBRATION_MAX_SECONDS:
+        later = previous < math.inf
+        enough = later and (done >= max_steps or
+                            time.perf_counter() - clock >= CALIBRATION_MAX_SECONDS)
+        if settled or enough:
             return min(per_step, previous)
+        if not later:       # the time limit counts from the end of the compiling batch
+            clock = time.perf_counter()
         previous = per_step
 
 

@@ -268,6 +268,51 @@ def test_snapshots_and_csv_of_a_scene_with_a_sink(tmp_path):
     for k in range(len(rows)):
         sim.advance_to(k / 20)
     np.testing.assert_allclose(snap["x"][-1][sim.sphere_ids], sim.state().x, rtol=0, atol=1e-6)
+    # a run continued from a checkpoint keeps the snapshots before it
+    r = cli("run", "sink.toml", "-o", "p.mp4", "--no-video", "--npz", "--duration", "0.2",
+            "--checkpoint-every", "3", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = cli("run", "sink.toml", "-o", "p.mp4", "--no-video", "--npz", "--resume",
+            "p.ckpt.npz", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    part = np.load(tmp_path / "p.npz")
+    for key in ("x", "v", "time"):
+        np.testing.assert_array_equal(part[key], snap[key])
+    assert read_csv(tmp_path / "p.csv") == rows
+
+
+def test_resume_refuses_what_it_cannot_continue(tmp_path):
+    """A checkpoint on the extra last frame of a duration off the frame grid is no frame
+    of a longer run; --npz needs the snapshots before the checkpoint; a CSV written
+    before a column existed keeps its rows under their own columns."""
+    (tmp_path / "tiny.toml").write_text(TINY)
+    r = cli("run", "tiny.toml", "-o", "a.mp4", "--no-video", "--duration", "0.52",
+            "--checkpoint-every", "4", cwd=tmp_path)        # checkpoints frame 11, t = 0.52
+    assert r.returncode == 0, r.stderr
+    r = cli("run", "tiny.toml", "-o", "a.mp4", "--no-video", "--duration", "0.7",
+            "--resume", "a.ckpt.npz", cwd=tmp_path)
+    assert r.returncode == 2 and "not at frame 11 of this run" in r.stderr
+    r = cli("run", "tiny.toml", "-o", "a.mp4", "--no-video", "--resume", "a.ckpt.npz",
+            cwd=tmp_path)                                     # 0.5 s: ends before frame 11
+    assert r.returncode == 2 and "nothing is left to run" in r.stderr
+    r = cli("run", "tiny.toml", "-o", "b.mp4", "--no-video", "--duration", "0.3",
+            "--checkpoint-every", "4", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = cli("run", "tiny.toml", "-o", "b.mp4", "--no-video", "--npz", "--resume", "b.ckpt.npz",
+            cwd=tmp_path)
+    assert r.returncode == 2 and "b.npz does not exist" in r.stderr
+    rows = read_csv(tmp_path / "b.csv")
+    with open(tmp_path / "b.csv", "w", newline="") as fh:      # as written before the column
+        old = [c for c in CSV_COLUMNS if c != "energy_discharged"]
+        writer = csv.DictWriter(fh, old, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
+    r = cli("run", "tiny.toml", "-o", "b.mp4", "--no-video", "--resume", "b.ckpt.npz",
+            cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    kept = read_csv(tmp_path / "b.csv")[:4]
+    assert [row["rotational"] for row in kept] == [row["rotational"] for row in rows[:4]]
+    assert all(row["energy_discharged"] == "nan" for row in kept)
 
 
 def test_output_cut_short_by_its_reader_ends_quietly(tmp_path):

@@ -93,3 +93,16 @@ def test_without_matplotlib_the_error_names_the_pip_command(monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib", None)      # import fails
     with pytest.raises(plot.PlotUnavailable, match=r"pip install 'taichi_spheres\[plot\]'"):
         plot._pyplot()
+
+
+def test_a_csv_without_the_optional_columns_reads_them_as_zero(run_csv, tmp_path):
+    """A CSV written before energy_discharged existed still plots."""
+    lines = run_csv.read_text().splitlines()
+    header = lines[0].split(",")
+    drop = [header.index(c) for c in plot.OPTIONAL_COLUMNS]
+    old = [",".join(v for k, v in enumerate(line.split(",")) if k not in drop) for line in lines]
+    (tmp_path / "old.csv").write_text("\n".join(old) + "\n")
+    data = plot.read_diagnostics(str(tmp_path / "old.csv"))
+    assert all(not data[c].any() and len(data[c]) == len(lines) - 1
+               for c in plot.OPTIONAL_COLUMNS)
+    assert png_size(Path(plot.plot_diagnostics(str(tmp_path / "old.csv"))))[0] > 0

@@ -737,8 +737,8 @@ def test_friction_ranges_name_their_keys(tmp_path):
     assert problems == [
         "physics.friction: must be >= 0 and finite, got -0.3",
         "physics.wall_friction: must be >= 0 and finite, got -2.0",
-        "physics.rolling_friction: must be >= 0 and finite, got -1.0",
         "physics.tangential_restitution: must be in [-1, 1], got 1.5",
+        "physics.rolling_friction: must be >= 0 and finite, got -1.0",
     ]
 
 
