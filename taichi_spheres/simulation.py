@@ -32,7 +32,8 @@ from .contacts import near_allowance
 from .contacts.packed import packed_row_bytes, packs_rows
 from .grid import GridGeometry
 from . import discharge, observe, stepping
-from .scene import Scene, check_state
+from .checkpoint import scene_digest
+from .scene import Scene, check_state, mass_problem, radius_problem, speed_problem
 from .state import Features, State
 
 __all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS", "rest_speed_for",
@@ -154,6 +155,19 @@ def check_step_fraction(step_fraction) -> float:
     return value
 
 
+def _check_precision(scene: Scene, precision: str, step_fraction: float) -> None:
+    """ValueError naming the sphere whose speed, radius (for the box and step bound) or
+    mass ``precision`` cannot hold (scene.speed_problem, radius_problem, mass_problem),
+    as ``taichi-spheres run`` refuses them."""
+    problems = [speed_problem(precision, scene.v),
+                radius_problem(precision, scene.radius, scene.box_lo, scene.box_hi,
+                               step_fraction),
+                mass_problem(precision, scene.mass)]
+    problems = [p for p in problems if p]
+    if problems:
+        raise ValueError("; ".join(problems))
+
+
 def _checked_arguments(scene, step_fraction, max_sweeps, fused, compile_all, tuning) -> float:
     """Raise ValueError naming a bad Simulation argument; returns step_fraction."""
     if not isinstance(scene, Scene):
@@ -224,6 +238,7 @@ class Simulation:
         self.geometry = GridGeometry.for_scene(scene, step_fraction, self.tuning.performance)
         self.runtime = runtime.ensure(arch, precision, threads)
         self.precision = self.runtime.precision
+        _check_precision(scene, self.precision, step_fraction)
         #: which path a step takes (engine.Schedule)
         self.schedule = engines.Schedule.plan(
             scene.n, self.runtime.is_cpu,
@@ -256,6 +271,7 @@ class Simulation:
         #: scene indices of the spheres still simulated (sinks take some out)
         self.sphere_ids = np.arange(scene.n)
         self._original_material = scene.material.copy()
+        self._original_scene = scene
         # how a step runs (stepping.py): kernel by kernel, or fused for small CPU systems
         self._stepper = stepping.Stepper(self, fused=self.schedule.fused)
         self.initial_energy = observe.total_energy(scene, scene.gravity)
@@ -369,6 +385,9 @@ class Simulation:
             raise ValueError(f"time must be finite, got {time!r}")
         check_state(x, v, omega, self.scene.box_lo, self.scene.box_hi, self.scene.periodic,
                     self.sphere_ids)
+        too_fast = speed_problem(self.precision, v)
+        if too_fast:
+            raise ValueError(too_fast)
         if time is not None:
             self.time = float(time)
         if self.n == 0:        # every sphere has left (a sink): nothing is bound
@@ -377,10 +396,18 @@ class Simulation:
         self._engine.state.load(x, v, self.scene.radius, self.scene.mass, omega)
         self._measure_vmax()
 
+    @property
+    def original_scene(self) -> Scene:
+        """The scene this Simulation was made from, every sphere in it: ``sphere_ids``
+        index it, where sinks took spheres out of ``scene``."""
+        return self._original_scene
+
     def checkpoint(self) -> dict:
-        """Everything needed to continue bit-for-bit: state, time, step bound, counters."""
+        """Everything needed to continue bit-for-bit: state, time, step bound, counters,
+        and ``scene``, the digest of the scene it was made from (checkpoint.scene_digest)."""
         st = self.state()
-        return dict(x=st.x, v=st.v, omega=st.omega, radius=self.scene.radius.copy(),
+        return dict(scene=scene_digest(self._original_scene),
+                    x=st.x, v=st.v, omega=st.omega, radius=self.scene.radius.copy(),
                     mass=self.scene.mass.copy(), sphere_ids=self.sphere_ids.copy(),
                     time=self.time,
                     vmax2=self._vmax2, vmax2_near=self._vmax2_near,
@@ -394,6 +421,9 @@ class Simulation:
         """Continue from :meth:`checkpoint` output of a Simulation of the same scene,
         precision and settings (ValueError otherwise). A scene with sinks continues
         with the spheres the checkpoint kept."""
+        if "scene" in ckpt and ckpt["scene"] != scene_digest(self._original_scene):
+            raise ValueError("the checkpoint was made from a different scene than this "
+                             "Simulation's")
         if ckpt["n"] != self.n and getattr(self.scene, "sinks", ()) and "radius" in ckpt:
             self._load_checkpoint_spheres(ckpt)
         for key in ("n", "precision", "step_fraction", "max_sweeps"):

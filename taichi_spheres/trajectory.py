@@ -41,7 +41,8 @@ LOG_PREFIX = "taichi_spheres/"
 LOGGED_STATS = ("steps", "pair_collisions", "wall_collisions", "wall_rests", "sweeps",
                 "max_overlap", "unresolved", "collapse_collisions", "energy_pair_restitution",
                 "energy_wall_restitution", "energy_collapse", "energy_contacts", "virial",
-                "contacts", "contact_iterations", "discharged", "discharged_mass")
+                "contacts", "contact_iterations", "discharged", "discharged_mass",
+                "energy_discharged")
 #: scenes with at most this many distinct radii (and no groups) get one type per radius
 MAX_SIZE_TYPES = 16
 _GSD_PRECISION = {"f64": "double", "f32": "single"}
@@ -164,7 +165,8 @@ class GSDWriter:
         state = sim.state()
         if self._file is None:
             self._open(_GSD_PRECISION.get(getattr(sim, "precision", "f64"), "double"))
-            self._types = particle_types(sim.scene)
+            # the types of the scene the run started from: sphere_ids index it
+            self._types = particle_types(getattr(sim, "original_scene", sim.scene))
         names, typeid = self._types
         ids = getattr(sim, "sphere_ids", None)     # spheres still in (sinks take some out)
         if ids is not None and len(ids) != len(typeid):
@@ -269,7 +271,9 @@ class GSDFrame:
     (this package's own frames: the box they were written from; other files: HOOMD's
     box, centred at the origin); periodic: 3 bools, or None when the file does not say
     (HOOMD's boxes are periodic); types: names; typeid: (N,); time [s] (0 when not
-    logged); step; frame: its index in the file; frames: frames in the file."""
+    logged); step; frame: its index in the file; frames: frames in the file; omega:
+    (N, 3) angular velocities [rad/s] from ``angmom`` / (2 ``moment_inertia``), the
+    writer's convention (_rotation; zeros where the file holds no spin)."""
 
     x: np.ndarray
     v: np.ndarray
@@ -284,6 +288,7 @@ class GSDFrame:
     step: int
     frame: int
     frames: int
+    omega: np.ndarray | None = None
 
 
 def read_frame(path, frame: int = -1) -> GSDFrame:
@@ -334,13 +339,24 @@ def _frame_from_gsd(data, path, index, count) -> GSDFrame:
         periodic=None if periodic is None else tuple(bool(a) for a in periodic),
         types=list(p.types), typeid=np.asarray(p.typeid, dtype=np.int64),
         time=0.0 if time is None else float(np.ravel(time)[0]),
-        step=int(data.configuration.step), frame=index, frames=count)
+        step=int(data.configuration.step), frame=index, frames=count, omega=_spins(p))
+
+
+def _spins(p) -> np.ndarray:
+    """(N, 3) angular velocities [rad/s] of a frame's particles: the vector part of
+    HOOMD's ``angmom`` over twice ``moment_inertia`` (the inverse of _rotation for a
+    sphere, whose orientation is the identity); zero where the moment of inertia is."""
+    angmom = np.asarray(p.angmom, dtype=np.float64).reshape(-1, 4)[:, 1:]
+    inertia = np.asarray(p.moment_inertia, dtype=np.float64).reshape(-1, 3)
+    out = np.zeros_like(angmom)
+    np.divide(angmom, 2.0 * inertia, out=out, where=inertia > 0)
+    return out
 
 
 def scene_from_gsd(path, frame: int = -1, box=None, periodic=None, **physics):
-    """A :class:`Scene` whose spheres (positions, velocities, radii, masses, types) are
-    frame ``frame`` of a GSD file (-1: the last), e.g. to continue a run or start from
-    another tool's output.
+    """A :class:`Scene` whose spheres (positions, velocities, radii, masses, types, and
+    spins where the file holds them) are frame ``frame`` of a GSD file (-1: the last),
+    e.g. to continue a run or start from another tool's output.
 
     box: ((lo), (hi)) [m], default the frame's (this package's frames keep the box they
     were written from; other files give HOOMD's box centred at the origin); positions are
@@ -360,6 +376,8 @@ def scene_from_gsd(path, frame: int = -1, box=None, periodic=None, **physics):
         periodic = data.periodic if data.periodic is not None else (True, True, True)
     physics.setdefault("name", os.path.splitext(os.path.basename(os.fspath(path)))[0])
     physics.setdefault("gravity", (0.0, 0.0, 0.0))
+    if np.any(data.omega != 0):
+        physics.setdefault("omega", data.omega)
     scene = Scene.from_arrays(x, data.v, data.radius, mass=data.mass, box=(lo, hi),
                               periodic=periodic, **physics)
     meta = {"groups": data.typeid, "group_names": data.types,

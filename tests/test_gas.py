@@ -1,5 +1,7 @@
 """Many-body invariants: elastic gases conserve energy and momentum, runs are
 bit-for-bit reproducible, steps land on requested times, features compile out."""
+import dataclasses
+
 import numpy as np
 import pytest
 import taichi as ti
@@ -282,6 +284,23 @@ def test_bad_simulation_arguments(arch):
     tiny = ts.Scene.from_arrays([[0.5, 0.5, 0.5]], [[0, 0, 0]], 0.2, periodic=True)
     with pytest.raises(ValueError, match="periodic axis x"):
         ts.Simulation(tiny, arch=arch)
+    # what f32 cannot hold is refused as taichi-spheres run refuses it
+    far = ts.Scene.from_arrays([[2e4, 2e4, 2e4]], [[1.0, 0, 0]], 0.05,
+                               box=((2e4 - 1, 2e4 - 1, 2e4 - 1), (2e4 + 1, 2e4 + 1, 2e4 + 1)))
+    with pytest.raises(ValueError, match="radius of sphere 0 .* f32"):
+        ts.Simulation(far, arch=arch, precision="f32")
+    fast = ts.Scene.from_arrays([[0.5, 0.5, 0.5]], [[1e20, 0, 0]], 0.1)
+    with pytest.raises(ValueError, match="speed of sphere 0 .* overflows f32"):
+        ts.Simulation(fast, arch=arch, precision="f32")
+
+
+def test_restore_refuses_a_checkpoint_of_another_scene(arch):
+    scene = gas(10, packing=0.05, periodic=True)
+    sim = ts.Simulation(scene, arch=arch)
+    sim.advance(0.01)
+    other = ts.Simulation(dataclasses.replace(scene, restitution=0.5), arch=arch)
+    with pytest.raises(ValueError, match="different scene"):
+        other.restore(sim.checkpoint())
 
 
 @pytest.mark.parametrize("periodic", [False, True])
@@ -298,7 +317,8 @@ def test_set_state_refuses_what_no_state_can_hold(arch, periodic):
              (dict(x=np.array([[5.0, 0.5, 0.5], [0.7, 0.5, 0.5]])), "sphere 0: centre"),
              (dict(x=np.array([[0.3, 0.5, 1.0], [0.7, 0.5, 0.5]])), None),
              (dict(x=np.array([[0.3, 0.5, 1.0 + 1e-5], [0.7, 0.5, 0.5]])), "sphere 0: centre"),
-             (dict(time=float("nan")), "time must be finite")]
+             (dict(time=float("nan")), "time must be finite"),
+             (dict(v=np.array([[1e200, 0.0, 0.0], [0.0, 0.0, 0.0]])), "speed of sphere 0")]
     for change, words in cases:
         given = dict(x=x, v=v, omega=None, time=None) | change
         if words is None:   # on the wall, or on hi of a periodic axis (an f32 wrap's result)

@@ -137,6 +137,45 @@ def test_scene_from_gsd_continues_a_run(tmp_path):
     assert again.meta["initial"]["time"] == pytest.approx(0.1)
 
 
+def test_spin_comes_back_from_a_frame(tmp_path):
+    """A frictional run's frame holds angmom; scene_from_gsd gives the spheres their
+    spins back (omega = angmom / 2 I)."""
+    scene = walled_scene()
+    scene = ts.Scene.from_arrays(scene.x, scene.v, scene.radius, mass=scene.mass,
+                                 box=(scene.box_lo, scene.box_hi), gravity=scene.gravity,
+                                 restitution=0.9, wall_restitution=0.9, friction=0.5,
+                                 omega=np.arange(15, dtype=float).reshape(5, 3))
+    sim = ts.Simulation(scene)
+    sim.advance(0.05)
+    with ts.GSDWriter(tmp_path / "spin.gsd") as writer:
+        writer.append(sim)
+    again = ts.scene_from_gsd(tmp_path / "spin.gsd", gravity=scene.gravity, friction=0.5)
+    np.testing.assert_allclose(again.omega, sim.state().omega, rtol=1e-12)
+    assert np.any(again.omega != 0)
+
+
+def test_first_frame_after_a_discharge(tmp_path):
+    """A writer whose first frame comes after a sink took spheres out types the spheres
+    of the scene the run started from."""
+    x = np.array([[0.2 + 0.1 * k, 0.5, 0.15 if k < 2 else 0.6] for k in range(8)])
+    radius = np.where(np.arange(8) % 2 == 0, 0.03, 0.04)
+    scene = ts.Scene.from_arrays(x, np.zeros_like(x), radius, gravity=(0, 0, -9.81),
+                                 sinks=[ts.Sink((0, 0, 0), (1, 1, 0.1))])
+    sim = ts.Simulation(scene)
+    sim.advance_to(0.25)
+    assert 0 < sim.n < 8
+    with ts.GSDWriter(tmp_path / "late.gsd") as writer:
+        writer.append(sim)
+        sim.advance_to(0.3)
+        writer.append(sim)
+    with gsd_hoomd.open(str(tmp_path / "late.gsd")) as traj:
+        frames = list(traj)
+    assert frames[-1].particles.N == sim.n
+    want = np.where(sim.sphere_ids % 2 == 0, 0, 1)         # r=0.03, r=0.04
+    np.testing.assert_array_equal(frames[-1].particles.typeid, want)
+    assert frames[-1].particles.types == ["r=0.03", "r=0.04"]
+
+
 def test_a_frame_with_spheres_behind_a_finite_shell_starts_a_new_scene(tmp_path):
     """A sphere that went under a platform cone (its back face) in a run is where the
     run may put it: the frame starts a new scene with the same geometry."""
