@@ -97,7 +97,8 @@ def material_indices(material, n: int, count: int) -> np.ndarray:
 
 
 def resolved_pairs(pairs, count: int) -> dict:
-    """{(a, b): Material} overrides, a <= b, checked against ``count`` materials."""
+    """{(a, b): Material} overrides, a <= b, checked against ``count`` materials; a pair
+    given twice ((a, b) and (b, a)) is an error naming it, not a silent last choice."""
     out = {}
     for key, m in dict(pairs or {}).items():
         try:
@@ -109,7 +110,11 @@ def resolved_pairs(pairs, count: int) -> dict:
             raise ValueError(f"material_pairs[{key!r}]: indices must be in [0, {count})")
         if not isinstance(m, Material):
             raise ValueError(f"material_pairs[{key!r}] must be a ts.Material")
-        out[(min(a, b), max(a, b))] = m
+        pair = (min(a, b), max(a, b))
+        if pair in out:
+            raise ValueError(f"material_pairs: the pair {pair} is given twice "
+                             f"({key!r} and its reverse)")
+        out[pair] = m
     return out
 
 

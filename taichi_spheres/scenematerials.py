@@ -47,7 +47,10 @@ def material_tables(data: dict, check_table, problems: list) -> dict:
         before = len(problems)
         check_table(item, PAIR_SCHEMA, where + ".", problems)
         ends = _pair_names(where, item, names, problems)
-        if len(problems) == before:
+        if len(problems) == before and tuple(sorted(ends)) in pairs:
+            problems.append(f"{where}: the pair {names[ends[0]]}/{names[ends[1]]} is "
+                            f"given by an earlier [[material_pair]] too")
+        elif len(problems) == before:
             values = {k: v for k, v in item.items() if k != "materials"}
             try:
                 label = f"{names[ends[0]]}/{names[ends[1]]}"

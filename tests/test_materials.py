@@ -63,6 +63,8 @@ def test_equal_materials_compile_the_lookups_out():
     (dict(material=[0, 0, 0]), "shape (2,)"),
     (dict(material=1), "material of sphere 0 is 1"),
     (dict(material_pairs={(0, 3): GLASS}), "material_pairs[(0, 3)]"),
+    (dict(materials=[GLASS, RUBBER], material=[0, 1],
+          material_pairs={(0, 1): GLASS, (1, 0): RUBBER}), "the pair (0, 1) is given twice"),
     (dict(materials=[GLASS, GLASS]), "names must differ"),
     (dict(materials=[ts.Material()] * 17), "at most 16"),
 ])
@@ -275,6 +277,9 @@ def test_scene_file_materials(tmp_path):
     (('materials = ["glass", "rubber"]', 'materials = ["glass"]'),
      "material_pair[0].materials: must be a list of two material names"),
     (('friction = 0.092', 'frict = 0.092'), "unknown key 'material[0].frict'"),
+    (('[[material_pair]]', '[[material_pair]]\nmaterials = ["rubber", "glass"]\n'
+                           'restitution = 0.2\n[[material_pair]]'),
+     "material_pair[1]: the pair glass/rubber is given by an earlier [[material_pair]]"),
 ])
 def test_scene_file_material_problems_are_named(tmp_path, change, words):
     path = tmp_path / "bad.toml"
