@@ -213,6 +213,11 @@ class Scene:
         if scene.frictional and restitution_model == "smid":
             raise ValueError("restitution_model 'smid' has no tangential model: use "
                              "'normal' with friction")
+        spinning = np.flatnonzero(np.any(scene.omega != 0, axis=1))
+        if spinning.size and not scene.frictional:
+            raise ValueError(f"omega of sphere {spinning[0]} is not zero, but the scene has "
+                             f"no friction, so spins would not act and are not simulated: "
+                             f"give a friction coefficient or leave omega out")
         return scene
 
     def replace(self, **changes) -> "Scene":

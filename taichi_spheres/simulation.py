@@ -373,8 +373,9 @@ class Simulation:
         """Overwrite positions x [m], velocities v [m/s] and spins omega [rad/s] (None:
         zero), each (N, 3), and the time [s] if given (e.g. from a checkpoint).
         ValueError for a wrong shape, a value that is not finite or a centre outside the
-        box, naming the sphere (scene.check_state). Overlaps are not checked: a state
-        the engine wrote may hold the small ones its steps leave."""
+        box, or a speed the precision cannot hold, naming the sphere (scene.check_state),
+        and for spins in a scene without friction (they are not simulated). Overlaps are
+        not checked: a state the engine wrote may hold the small ones its steps leave."""
         self._check()
         x = np.asarray(x, dtype=np.float64)
         v = np.asarray(v, dtype=np.float64)
@@ -388,6 +389,10 @@ class Simulation:
         too_fast = speed_problem(self.precision, v)
         if too_fast:
             raise ValueError(too_fast)
+        spinning = np.flatnonzero(np.any(omega != 0, axis=1))
+        if spinning.size and not self.features.friction:
+            raise ValueError(f"omega of sphere {self.sphere_ids[spinning[0]]} is not zero, "
+                             f"but the scene has no friction: spins are not simulated")
         if time is not None:
             self.time = float(time)
         if self.n == 0:        # every sphere has left (a sink): nothing is bound

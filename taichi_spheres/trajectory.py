@@ -355,8 +355,9 @@ def _spins(p) -> np.ndarray:
 
 def scene_from_gsd(path, frame: int = -1, box=None, periodic=None, **physics):
     """A :class:`Scene` whose spheres (positions, velocities, radii, masses, types, and
-    spins where the file holds them) are frame ``frame`` of a GSD file (-1: the last),
-    e.g. to continue a run or start from another tool's output.
+    spins where the file holds them and the scene has friction) are frame ``frame`` of
+    a GSD file (-1: the last), e.g. to continue a run or start from another tool's
+    output.
 
     box: ((lo), (hi)) [m], default the frame's (this package's frames keep the box they
     were written from; other files give HOOMD's box centred at the origin); positions are
@@ -376,10 +377,10 @@ def scene_from_gsd(path, frame: int = -1, box=None, periodic=None, **physics):
         periodic = data.periodic if data.periodic is not None else (True, True, True)
     physics.setdefault("name", os.path.splitext(os.path.basename(os.fspath(path)))[0])
     physics.setdefault("gravity", (0.0, 0.0, 0.0))
-    if np.any(data.omega != 0):
-        physics.setdefault("omega", data.omega)
     scene = Scene.from_arrays(x, data.v, data.radius, mass=data.mass, box=(lo, hi),
                               periodic=periodic, **physics)
+    if "omega" not in physics and scene.frictional and np.any(data.omega != 0):
+        scene = scene.replace(omega=data.omega)     # spins act only with friction
     meta = {"groups": data.typeid, "group_names": data.types,
             "group_colours": np.full((len(data.types), 3), -1.0),
             "initial": {"gsd": os.fspath(path), "frame": data.frame, "time": data.time,

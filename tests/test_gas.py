@@ -318,7 +318,8 @@ def test_set_state_refuses_what_no_state_can_hold(arch, periodic):
              (dict(x=np.array([[0.3, 0.5, 1.0], [0.7, 0.5, 0.5]])), None),
              (dict(x=np.array([[0.3, 0.5, 1.0 + 1e-5], [0.7, 0.5, 0.5]])), "sphere 0: centre"),
              (dict(time=float("nan")), "time must be finite"),
-             (dict(v=np.array([[1e200, 0.0, 0.0], [0.0, 0.0, 0.0]])), "speed of sphere 0")]
+             (dict(v=np.array([[1e200, 0.0, 0.0], [0.0, 0.0, 0.0]])), "speed of sphere 0"),
+             (dict(omega=np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])), "no friction")]
     for change, words in cases:
         given = dict(x=x, v=v, omega=None, time=None) | change
         if words is None:   # on the wall, or on hi of a periodic axis (an f32 wrap's result)

@@ -95,6 +95,8 @@ def test_scene_geometry_packs_resolved_values():
     (dict(omega=[[0, 0, 0], [np.nan, 0, 0]]), "omega of sphere 1 is not finite"),
     (dict(omega=[0, 0, 1]), "omega"),
     (dict(omega=[[0, 0, 0], [0, 0, 1e200]]), "omega: surface speed of sphere 1"),
+    (dict(omega=[[0, 0, 0], [0, 0, 1.0]], friction=0.0),
+     "omega of sphere 1 is not zero, but the scene has no friction"),
     (dict(geometry=[ts.Sink((0, 0, 0), (1, 1, 1))]), "geometry\\[0\\] must be a ts.Plane"),
     (dict(sinks=[ts.Plane((0, 0, 0), (0, 0, 1))]), "sinks\\[0\\] must be a ts.Sink"),
     (dict(wall_friction=0.1, restitution_model="smid"), "smid"),

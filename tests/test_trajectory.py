@@ -152,6 +152,8 @@ def test_spin_comes_back_from_a_frame(tmp_path):
     again = ts.scene_from_gsd(tmp_path / "spin.gsd", gravity=scene.gravity, friction=0.5)
     np.testing.assert_allclose(again.omega, sim.state().omega, rtol=1e-12)
     assert np.any(again.omega != 0)
+    smooth = ts.scene_from_gsd(tmp_path / "spin.gsd", gravity=scene.gravity)
+    assert not smooth.frictional and not smooth.omega.any()     # spins act only with friction
 
 
 def test_first_frame_after_a_discharge(tmp_path):
