@@ -18,7 +18,8 @@ from . import materials as mat
 __all__ = ["Scene", "DEFAULT_DENSITY", "TOUCH_TOLERANCE", "RESTITUTION_MODELS", "MIN_STEP_ULPS",
            "OVERFLOW_HEADROOM", "largest_speed", "smallest_radius", "fall_speed",
            "speed_problem", "radius_problem", "mass_problem", "gravity_problem",
-           "vector_text", "check_state", "FRICTION_RANGES", "PERIODIC_SLACK"]
+           "vector_text", "check_state", "FRICTION_RANGES", "PERIODIC_SLACK",
+           "scene_precision_problems", "spin_problem"]
 
 #: Simulation.set_state accepts a centre this far outside a periodic axis's [lo, hi),
 #: relative to the largest of |lo|, |hi| and the box's extent: the engine's wrap x +- L
@@ -213,11 +214,9 @@ class Scene:
         if scene.frictional and restitution_model == "smid":
             raise ValueError("restitution_model 'smid' has no tangential model: use "
                              "'normal' with friction")
-        spinning = np.flatnonzero(np.any(scene.omega != 0, axis=1))
-        if spinning.size and not scene.frictional:
-            raise ValueError(f"omega of sphere {spinning[0]} is not zero, but the scene has "
-                             f"no friction, so spins would not act and are not simulated: "
-                             f"give a friction coefficient or leave omega out")
+        problem = spin_problem(scene.omega, scene.frictional)
+        if problem:
+            raise ValueError(problem)
         return scene
 
     def replace(self, **changes) -> "Scene":
@@ -443,6 +442,30 @@ def mass_problem(precision: str, mass) -> str | None:
             f"({low:.2g} .. {high:.2g} kg)" + _more(bad))
 
 
+def scene_precision_problems(scene, precision: str, step_fraction: float) -> list:
+    """What ``precision`` ("f32" | "f64") cannot hold in ``scene``: the fastest speed,
+    radii too small to move in the box at ``step_fraction``, masses (speed_problem,
+    radius_problem, mass_problem); [] if nothing."""
+    problems = [speed_problem(precision, scene.v),
+                radius_problem(precision, scene.radius, scene.box_lo, scene.box_hi,
+                               step_fraction),
+                mass_problem(precision, scene.mass)]
+    return [p for p in problems if p]
+
+
+def spin_problem(omega, frictional: bool, ids=None) -> str | None:
+    """Why nonzero spins (N, 3) [rad/s] cannot be given (a scene without friction: they
+    would not act and are not simulated), naming the first sphere (``ids``: the scene
+    numbers of the rows), or None."""
+    spinning = np.flatnonzero(np.any(np.asarray(omega) != 0, axis=1))
+    if not spinning.size or frictional:
+        return None
+    i = spinning[0] if ids is None else ids[spinning[0]]
+    return (f"omega of sphere {i} is not zero, but the scene has no friction, so spins "
+            f"would not act and are not simulated: give a friction coefficient or leave "
+            f"omega out")
+
+
 def gravity_problem(precision: str, gravity, speed: float) -> str | None:
     """Why gravity [m/s^2], which gives spheres up to ``speed`` [m/s], overflows
     ``precision``, or None."""
@@ -551,7 +574,8 @@ def _inside_box(x, radius, lo, hi, periodic):
 def check_state(x, v, omega, lo, hi, periodic, ids=None) -> None:
     """ValueError naming the first sphere whose position (N, 3) [m], velocity (N, 3)
     [m/s] or spin (N, 3) [rad/s] is not finite, or whose centre lies outside the box
-    [lo, hi] (on a periodic axis by more than PERIODIC_SLACK of the box's extent): the
+    [lo, hi] (on a periodic axis by more than PERIODIC_SLACK times the largest of |lo|,
+    |hi| and the box's extent): the
     checks of a state given to Simulation.set_state; ``ids`` (N,): the scene numbers
     of the rows, named in the message (default: the row numbers). Overlaps with
     neighbours or walls are not checked: a state the engine wrote may hold the small

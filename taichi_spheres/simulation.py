@@ -33,7 +33,8 @@ from .contacts.packed import packed_row_bytes, packs_rows
 from .grid import GridGeometry
 from . import discharge, observe, stepping
 from .checkpoint import scene_digest
-from .scene import Scene, check_state, mass_problem, radius_problem, speed_problem
+from .scene import (Scene, check_state, scene_precision_problems, speed_problem,
+                    spin_problem)
 from .state import Features, State
 
 __all__ = ["Simulation", "DEFAULT_STEP_FRACTION", "DEFAULT_MAX_SWEEPS", "rest_speed_for",
@@ -157,13 +158,9 @@ def check_step_fraction(step_fraction) -> float:
 
 def _check_precision(scene: Scene, precision: str, step_fraction: float) -> None:
     """ValueError naming the sphere whose speed, radius (for the box and step bound) or
-    mass ``precision`` cannot hold (scene.speed_problem, radius_problem, mass_problem),
-    as ``taichi-spheres run`` refuses them."""
-    problems = [speed_problem(precision, scene.v),
-                radius_problem(precision, scene.radius, scene.box_lo, scene.box_hi,
-                               step_fraction),
-                mass_problem(precision, scene.mass)]
-    problems = [p for p in problems if p]
+    mass ``precision`` cannot hold (scene.scene_precision_problems), as ``taichi-spheres
+    run`` refuses them."""
+    problems = scene_precision_problems(scene, precision, step_fraction)
     if problems:
         raise ValueError("; ".join(problems))
 
@@ -387,12 +384,9 @@ class Simulation:
         check_state(x, v, omega, self.scene.box_lo, self.scene.box_hi, self.scene.periodic,
                     self.sphere_ids)
         too_fast = speed_problem(self.precision, v)
-        if too_fast:
-            raise ValueError(too_fast)
-        spinning = np.flatnonzero(np.any(omega != 0, axis=1))
-        if spinning.size and not self.features.friction:
-            raise ValueError(f"omega of sphere {self.sphere_ids[spinning[0]]} is not zero, "
-                             f"but the scene has no friction: spins are not simulated")
+        problem = too_fast or spin_problem(omega, self.features.friction, self.sphere_ids)
+        if problem:
+            raise ValueError(problem)
         if time is not None:
             self.time = float(time)
         if self.n == 0:        # every sphere has left (a sink): nothing is bound

@@ -20,8 +20,7 @@ import time
 
 import numpy as np
 
-from .scene import (fall_speed, gravity_problem, mass_problem, radius_problem, speed_problem,
-                    vector_text)
+from .scene import fall_speed, gravity_problem, scene_precision_problems, vector_text
 
 __all__ = ["MAX_STEPS", "Workload", "estimate", "frame_count", "frame_time",
            "precision_problems", "refusal", "model_step_seconds", "measure_step_seconds",
@@ -150,10 +149,7 @@ def _speed_cap(scene, v0: float) -> float:
 def precision_problems(scene, precision: str, work: Workload) -> list:
     """What in ``scene`` ``precision`` ("f32" | "f64") cannot hold: speeds, gravity's
     speeds over the run, masses, radii too small to move in the box; [] if nothing."""
-    problems = [speed_problem(precision, scene.v),
-                radius_problem(precision, scene.radius, scene.box_lo, scene.box_hi,
-                               work.step_fraction),
-                mass_problem(precision, scene.mass)]
+    problems = scene_precision_problems(scene, precision, work.step_fraction)
     if work.by_gravity:       # else the fastest sphere's own speed is the problem, if any
         problems.append(gravity_problem(precision, work.gravity, work.v_top))
     return [p for p in problems if p]
