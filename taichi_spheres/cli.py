@@ -749,7 +749,10 @@ def sweep_grid(settings: list) -> dict:
             raise ValueError(f"--set {text!r}: write KEY=VALUE1,VALUE2,...")
         if key.strip() in grid:
             raise ValueError(f"--set {key.strip()} given twice: list all values in one --set")
-        grid[key.strip()] = split_values(values)
+        try:
+            grid[key.strip()] = split_values(values)
+        except ValueError as exc:
+            raise ValueError(f"--set {key.strip()}: {exc}") from None
     return grid
 
 

@@ -75,6 +75,8 @@ def test_set_values_parse_as_toml():
                                                                "fused": [False]}
     with pytest.raises(ValueError, match="KEY=VALUE1"):
         sweep_grid(["restitution"])
+    with pytest.raises(ValueError, match="--set restitution: empty value"):
+        sweep_grid(["restitution="])
 
 
 SEED_FIVE = os.path.join(os.path.dirname(__file__), "..", "scenes", "seed_five.toml")
