@@ -508,10 +508,13 @@ def _more(bad):
     return f" (and {bad.size - 1} more)" if bad.size > 1 else ""
 
 
-def _finite_rows(name, arr):
+def _finite_rows(name, arr, ids=None):
+    """ValueError naming the first sphere (``ids``: the scene numbers of the rows, default
+    the row numbers) whose row of ``arr`` is not finite."""
     bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
     if bad.size:
-        raise ValueError(f"{name} of sphere {bad[0]} is not finite ({arr[bad[0]].tolist()})"
+        i = bad[0] if ids is None else ids[bad[0]]
+        raise ValueError(f"{name} of sphere {i} is not finite ({arr[bad[0]].tolist()})"
                          + _more(bad))
 
 
@@ -575,17 +578,13 @@ def check_state(x, v, omega, lo, hi, periodic, ids=None) -> None:
     """ValueError naming the first sphere whose position (N, 3) [m], velocity (N, 3)
     [m/s] or spin (N, 3) [rad/s] is not finite, or whose centre lies outside the box
     [lo, hi] (on a periodic axis by more than PERIODIC_SLACK times the largest of |lo|,
-    |hi| and the box's extent): the
-    checks of a state given to Simulation.set_state; ``ids`` (N,): the scene numbers
-    of the rows, named in the message (default: the row numbers). Overlaps with
-    neighbours or walls are not checked: a state the engine wrote may hold the small
-    ones its steps leave."""
+    |hi| and the box's extent): the checks of a state given to Simulation.set_state;
+    ``ids`` (N,): the scene numbers of the rows, named in the message (default: the row
+    numbers). Overlaps with neighbours or walls are not checked: a state the engine
+    wrote may hold the small ones its steps leave."""
     ids = np.arange(len(x)) if ids is None else np.asarray(ids)
     for name, arr in (("x", x), ("v", v), ("omega", omega)):
-        bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
-        if bad.size:
-            raise ValueError(f"{name} of sphere {ids[bad[0]]} is not finite "
-                             f"({arr[bad[0]].tolist()})" + _more(bad))
+        _finite_rows(name, arr, ids)
     for a in range(3):
         slack = PERIODIC_SLACK * max(abs(lo[a]), abs(hi[a]), hi[a] - lo[a]) \
             if periodic[a] else 0.0

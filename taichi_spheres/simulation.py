@@ -267,7 +267,6 @@ class Simulation:
         self._sink_rng = np.random.default_rng(12345)   # free spots of recycled spheres
         #: scene indices of the spheres still simulated (sinks take some out)
         self.sphere_ids = np.arange(scene.n)
-        self._original_material = scene.material.copy()
         self._original_scene = scene
         # how a step runs (stepping.py): kernel by kernel, or fused for small CPU systems
         self._stepper = stepping.Stepper(self, fused=self.schedule.fused)
@@ -539,7 +538,7 @@ class Simulation:
         """Continue with the spheres of a checkpoint taken after a discharge (their
         materials those of the original scene's spheres of the same ids)."""
         ids = np.asarray(ckpt.get("sphere_ids", np.arange(len(ckpt["mass"]))))
-        material = self._original_material[ids]
+        material = self._original_scene.material[ids]
         self.scene = dataclasses.replace(
             self.scene, x=np.asarray(ckpt["x"], dtype=np.float64),
             v=np.asarray(ckpt["v"], dtype=np.float64),
